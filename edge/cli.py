@@ -1,0 +1,48 @@
+"""The ``superbody`` console script.
+
+One program, subcommands contributed by each package: every entry point in the
+``superbody.commands`` group is a ``register(subparsers)`` function that adds its commands and
+sets ``func`` on each parser. ``func(args)`` returns the exit code.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from importlib.metadata import entry_points
+
+__all__ = ["main", "register", "build_parser"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="superbody", description="Multi-camera torso pose appliance.")
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for ep in sorted(entry_points(group="superbody.commands"), key=lambda e: e.name):
+        ep.load()(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.INFO,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+        stream=sys.stderr,
+    )
+    try:
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        return 130
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the edge package's commands: ``edge run``."""
+    from edge import node
+
+    node.register(sub)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
