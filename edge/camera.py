@@ -161,9 +161,9 @@ def undistort(uv: NDArray, cam: Camera) -> NDArray[np.float64]:
     xd = (uv - [cam.cx, cam.cy]) / [cam.fx, cam.fy]  # (N, 2) distorted, normalised
     if not np.any(cam.D) or len(uv) == 0:
         return xd
-    guess = cv2.undistortPointsIter(
-        uv.reshape(-1, 1, 2), cam.K, cam.D, None, None,
-        (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12),
+    guess = cv2.undistortPoints(
+        uv.reshape(-1, 1, 2), cam.K, cam.D,
+        criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12),
     ).reshape(-1, 2)
     xn = guess.astype(np.float64)
     eps = 1e-7

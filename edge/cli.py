@@ -38,10 +38,11 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    """Add the edge package's commands: ``edge run``."""
-    from edge import node
+    """Add the edge package's commands: ``edge run``, ``router``."""
+    from edge import node, router
 
     node.register(sub)
+    router.register(sub)
 
 
 if __name__ == "__main__":

@@ -61,8 +61,10 @@ def bhattacharyya_matrix(a: NDArray, b: NDArray) -> NDArray[np.float64]:
     Returns:
         Distances, shape (N, M), in [0, 1].
     """
-    sa = np.sqrt(np.maximum(np.asarray(a, dtype=np.float64).reshape(len(a), -1), 0.0))  # (N, B)
-    sb = np.sqrt(np.maximum(np.asarray(b, dtype=np.float64).reshape(len(b), -1), 0.0))  # (M, B)
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    sa = np.sqrt(np.maximum(a.reshape(len(a), int(np.prod(a.shape[1:]))), 0.0))  # (N, B)
+    sb = np.sqrt(np.maximum(b.reshape(len(b), int(np.prod(b.shape[1:]))), 0.0))  # (M, B)
     # Normalise so that histograms not summing to exactly 1 still compare on shape.
     na = np.linalg.norm(sa, axis=1, keepdims=True)
     nb = np.linalg.norm(sb, axis=1, keepdims=True)

@@ -1,0 +1,43 @@
+"""``superbody router``: a Zenoh router in a Python process, for a site without zenohd.
+
+The demo and the tests start one on loopback; production sites may run zenohd with the
+configs in deploy/zenoh/ instead. Cameras and the host connect to it as peers or clients.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import threading
+
+from edge import transport
+
+__all__ = ["run_router", "register"]
+
+log = logging.getLogger("superbody.router")
+
+
+def run_router(listen: list[str], stop: threading.Event, config_file: str | None = None) -> None:
+    """Run a router listening on ``listen`` until ``stop`` is set."""
+    import zenoh
+
+    conf = transport.session_config("router", connect=[], listen=listen, config_file=config_file)
+    with zenoh.open(conf):
+        log.info("zenoh router listening on %s", ", ".join(listen))
+        stop.wait()
+
+
+def _run(args: argparse.Namespace) -> int:
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    run_router(args.listen or [transport.DEFAULT_ENDPOINT], stop, args.config)
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("router", help="run a Zenoh router (loopback by default)")
+    p.add_argument("-l", "--listen", action="append", metavar="ENDPOINT", help=f"endpoint to listen on (default {transport.DEFAULT_ENDPOINT})")
+    p.add_argument("-c", "--config", metavar="FILE", help="Zenoh JSON5 configuration file")
+    p.set_defaults(func=_run)

@@ -1,0 +1,584 @@
+"""Simulator of people walking in a site, and of what each camera's 2D detector reports.
+
+Library code shared by the simulated camera nodes, the tests, the demo and training.
+
+Two parts:
+
+- ``World``: people with varied body sizes and clothing move through the site's floor,
+  avoiding obstacles: they walk between waypoints with gait and arm swing, turn in place,
+  stand still and sometimes side-step. A person's plan is periodic and is a pure function of
+  absolute time, so any process that builds a ``World`` from the same site and seed sees the
+  same people at the same instant (the shared world clock of the simulated camera nodes).
+- ``render_views``: for one camera, what a detector such as OpenPifPaf would output: joints
+  projected through the camera model, dropped outside the image, behind obstacles or other
+  people, with a noise model (latent per-joint confidence thresholded at 0.5 as the
+  WheresTheFellow data was, pixel noise, left/right swaps, occasional spurious people) and a
+  hue-saturation histogram computed by ``edge.colour.hs_histogram`` from a synthetic patch of
+  the person's clothing under the camera's lighting.
+
+Ground truth is each person's torso pose (x, y, yaw) in REP-103.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import dataclass, field
+from typing import Final
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from edge import body
+from edge.camera import Camera, project, world_to_camera
+from edge.colour import hs_histogram
+from edge.observation import Observation, PersonView
+from edge.site import Site
+
+__all__ = [
+    "NoiseModel",
+    "Appearance",
+    "SimPerson",
+    "PersonState",
+    "World",
+    "Lighting",
+    "skeleton",
+    "render_views",
+    "SimCamera",
+    "wrap_angle",
+]
+
+# Lateral (left-positive), forward and height offsets of each joint for a 1.75 m person
+# standing still, in metres. Arms and legs are recomputed with the gait.
+_LATERAL: Final = np.array([0.0, 0.032, -0.032, 0.075, -0.075, 0.19, -0.19, 0.21, -0.21, 0.2, -0.2, 0.1, -0.1, 0.1, -0.1, 0.1, -0.1])
+_FORWARD: Final = np.array([0.1, 0.075, 0.075, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.03, 0.03, 0.0, 0.0, 0.02, 0.02, 0.0, 0.0])
+_HEIGHT: Final = np.asarray(body.TYPICAL_HEIGHT_M)
+_LEFT: Final = np.array([i for i, n in enumerate(body.KEYPOINTS) if n.startswith("left_")])
+_RIGHT: Final = np.array([body.MIRROR[i] for i in _LEFT])
+_FACE: Final = np.array([0, 1, 2])
+_PERSON_RADIUS_M: Final = 0.2
+
+
+def wrap_angle(a: NDArray | float) -> NDArray | float:
+    """Wrap angles to (-pi, pi]."""
+    w = np.mod(np.asarray(a) + np.pi, 2 * np.pi) - np.pi
+    w = np.where(w == -np.pi, np.pi, w)
+    return float(w) if np.ndim(w) == 0 else w
+
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """What a real 2D pose detector does to the truth. Defaults tuned against WheresTheFellow.
+
+    Attributes:
+        pixel_noise_px: std of Gaussian pixel noise at 3 m; grows with the joint's apparent size.
+        score_mean: mean latent confidence of a clearly visible joint.
+        score_std: std of the latent confidence.
+        score_threshold: joints below this confidence are not reported (OpenPifPaf used 0.5).
+        far_side_penalty: confidence lost by a joint on the side of the body facing away.
+        face_away_penalty: confidence lost by face joints when the person faces away.
+        distance_penalty: confidence lost per metre beyond 3 m.
+        border_px: joints within this many pixels of the image border lose confidence.
+        occluded_keep: probability that a joint hidden by an obstacle or a person is still
+            reported (detectors hallucinate plausible joints), with lowered confidence.
+        swap_prob: probability that a view has its left and right joints swapped.
+        spurious_prob: probability per frame of a spurious partial person.
+        min_joints: a person is reported only with at least this many joints.
+        depth_noise_m: std of the depth noise of 3D points, per metre of depth.
+    """
+
+    pixel_noise_px: float = 2.5
+    score_mean: float = 0.82
+    score_std: float = 0.11
+    score_threshold: float = 0.5
+    far_side_penalty: float = 0.12
+    face_away_penalty: float = 0.45
+    distance_penalty: float = 0.03
+    border_px: float = 12.0
+    occluded_keep: float = 0.15
+    swap_prob: float = 0.03
+    spurious_prob: float = 0.01
+    min_joints: int = 1
+    depth_noise_m: float = 0.01
+
+
+@dataclass(frozen=True)
+class Appearance:
+    """A person's body and clothing. Colours are OpenCV HSV (hue 0-179, sat/val 0-255)."""
+
+    height_m: float
+    width_scale: float
+    shirt_hsv: tuple[int, int, int]
+    trousers_hsv: tuple[int, int, int]
+    skin_hsv: tuple[int, int, int]
+
+
+@dataclass(frozen=True)
+class Lighting:
+    """One camera's view of colour: brightness gain, hue shift, saturation gain, background."""
+
+    gain: float = 1.0
+    hue_shift: float = 0.0
+    sat_gain: float = 1.0
+    background_hsv: tuple[int, int, int] = (20, 30, 160)
+
+
+@dataclass(frozen=True)
+class PersonState:
+    """One person at one instant: ground truth and 3D joints.
+
+    Attributes:
+        x, y, yaw: torso pose in REP-103 (metres, radians in (-pi, pi]).
+        joints: (17, 3) world positions of the COCO-17 joints, metres.
+    """
+
+    x: float
+    y: float
+    yaw: float
+    joints: NDArray[np.float64]
+
+
+def skeleton(x: float, y: float, yaw: float, phase: float, walk: float, height_m: float = 1.75, width_scale: float = 1.0) -> NDArray[np.float64]:
+    """3D COCO-17 joints of a person standing or walking.
+
+    Args:
+        x, y, yaw: torso pose on the floor.
+        phase: gait phase in radians (one stride per 2 pi).
+        walk: 0 standing still .. 1 walking at full stride.
+        height_m: body height; all lengths scale with it.
+        width_scale: lateral scale (build).
+
+    Returns:
+        Joints, shape (17, 3), world frame.
+    """
+    s = height_m / 1.75
+    f = np.array([math.cos(yaw), math.sin(yaw), 0.0])  # facing
+    l = np.array([-math.sin(yaw), math.cos(yaw), 0.0])  # left
+    z = np.array([0.0, 0.0, 1.0])
+    base = np.array([x, y, 0.0])
+    lateral = _LATERAL * s * width_scale
+    forward = _FORWARD * s
+    j = base + lateral[:, None] * l + forward[:, None] * f + (_HEIGHT * s)[:, None] * z  # (17, 3)
+    leg_amp, arm_amp = 0.38 * walk, 0.32 * walk
+    thigh, shin, upper, fore = 0.43 * s, 0.42 * s, 0.31 * s, 0.27 * s
+    for side, (hip, knee, ankle, sh, elb, wri) in ((0.0, (11, 13, 15, 5, 7, 9)), (math.pi, (12, 14, 16, 6, 8, 10))):
+        theta = leg_amp * math.sin(phase + side)  # leg swing, forward positive
+        bend = walk * 0.5 * max(0.0, math.cos(phase + side))  # knee flexes in the swing phase
+        j[knee] = j[hip] + thigh * (math.sin(theta) * f - math.cos(theta) * z)
+        j[ankle] = j[knee] + shin * (math.sin(theta - bend) * f - math.cos(theta - bend) * z)
+        alpha = -arm_amp * math.sin(phase + side)  # arms swing against the legs
+        beta = 0.15 + 0.35 * walk * max(0.0, math.sin(-(phase + side)))  # elbow flex
+        j[elb] = j[sh] + upper * (math.sin(alpha) * f - math.cos(alpha) * z) + 0.02 * s * l * (1 if side == 0 else -1)
+        j[wri] = j[elb] + fore * (math.sin(alpha + beta) * f - math.cos(alpha + beta) * z)
+    # The stance foot carries the body: keep the lowest ankle at its standing height.
+    j[:, 2] += 0.08 * s - min(j[15, 2], j[16, 2])
+    return j
+
+
+@dataclass
+class _Plan:
+    """A person's periodic motion plan: segments of (start time, kind, parameters)."""
+
+    starts: list[float] = field(default_factory=list)
+    segments: list[tuple] = field(default_factory=list)
+    period: float = 0.0
+
+
+class SimPerson:
+    """One simulated person: appearance and a periodic plan of motion through the site."""
+
+    def __init__(self, site: Site, rng: np.random.Generator, period_s: float = 600.0):
+        self.site = site
+        h = float(np.clip(rng.normal(1.72, 0.08), 1.5, 1.95))
+        self.appearance = _random_appearance(rng, h)
+        self.phase_offset = float(rng.uniform(0, period_s))
+        self._plan = self._make_plan(rng, period_s)
+
+    # -- planning ---------------------------------------------------------------------------
+
+    def _make_plan(self, rng: np.random.Generator, period_s: float) -> _Plan:
+        plan = _Plan()
+        start = _random_free_point(self.site, rng)
+        pos, yaw, t = start, float(rng.uniform(-np.pi, np.pi)), 0.0
+        stride = 0.75 * self.appearance.height_m / 1.75
+
+        def add(duration: float, seg: tuple) -> None:
+            nonlocal t
+            plan.starts.append(t)
+            plan.segments.append((duration,) + seg)
+            t += duration
+
+        def walk_to(target: NDArray, speed: float, yaw_offset: float = 0.0) -> None:
+            nonlocal pos, yaw
+            d = target - pos
+            dist = float(np.linalg.norm(d))
+            if dist < 1e-3:
+                return
+            heading = math.atan2(d[1], d[0])
+            new_yaw = float(wrap_angle(heading + yaw_offset))
+            turn = float(wrap_angle(new_yaw - yaw))
+            if abs(turn) > 1e-3:
+                add(abs(turn) / 2.5, ("turn", pos.copy(), yaw, turn))  # turn in place at ~140 deg/s
+            add(dist / speed, ("walk", pos.copy(), target.copy(), new_yaw, stride))
+            pos, yaw = target, new_yaw
+
+        while t < period_s:
+            r = rng.uniform()
+            if r < 0.55:  # walk to a random reachable point
+                target = _random_reachable(self.site, rng, pos)
+                if target is not None:
+                    walk_to(target, float(rng.uniform(0.6, 1.4)))
+            elif r < 0.65:  # side-step or step backwards a short way
+                off = float(rng.choice([np.pi / 2, -np.pi / 2, np.pi]))
+                target = _random_reachable(self.site, rng, pos, max_dist=1.5)
+                if target is not None:
+                    walk_to(target, float(rng.uniform(0.3, 0.6)), yaw_offset=off)
+            elif r < 0.8:  # turn in place
+                turn = float(rng.uniform(-np.pi, np.pi))
+                add(abs(turn) / float(rng.uniform(1.0, 3.0)), ("turn", pos.copy(), yaw, turn))
+                yaw = float(wrap_angle(yaw + turn))
+            else:  # stand still
+                add(float(rng.uniform(0.5, 4.0)), ("stand", pos.copy(), yaw))
+        # Close the loop: walk back to the start and face the starting direction.
+        for _ in range(50):
+            if _segment_free(self.site, pos, start):
+                break
+            via = _random_reachable(self.site, rng, pos)
+            if via is not None and _segment_free(self.site, via, start):
+                walk_to(via, 1.0)
+                break
+        walk_to(start, 1.0)
+        first = plan.segments[0]
+        first_yaw = first[3] if first[1] in ("stand", "turn") else first[4]
+        turn = float(wrap_angle(first_yaw - yaw))
+        add(max(abs(turn) / 2.5, 0.05), ("turn", pos.copy(), yaw, turn))
+        plan.period = t
+        return plan
+
+    # -- state at a time ----------------------------------------------------------------------
+
+    def state(self, t_s: float) -> PersonState:
+        """The person's pose and joints at absolute time ``t_s`` (seconds)."""
+        tau = (t_s + self.phase_offset) % self._plan.period
+        i = max(bisect.bisect_right(self._plan.starts, tau) - 1, 0)
+        seg = self._plan.segments[i]
+        u = min(max((tau - self._plan.starts[i]) / seg[0], 0.0), 1.0) if seg[0] > 0 else 1.0
+        kind = seg[1]
+        a = self.appearance
+        if kind == "walk":
+            _, _, p0, p1, yaw, stride = seg
+            p = p0 + u * (p1 - p0)
+            travelled = u * float(np.linalg.norm(p1 - p0))
+            # A little ramp at both ends so the stride starts and stops smoothly.
+            walk = min(1.0, travelled / 0.3, (1 - u) * float(np.linalg.norm(p1 - p0)) / 0.3 + 0.2)
+            phase = 2 * np.pi * travelled / (2 * stride) + self.phase_offset
+            x, y = float(p[0]), float(p[1])
+        elif kind == "turn":
+            _, _, p0, yaw0, turn = seg
+            yaw = float(wrap_angle(yaw0 + u * turn))
+            x, y, walk, phase = float(p0[0]), float(p0[1]), 0.15, u * abs(turn) * 2
+        else:  # stand
+            _, _, p0, yaw = seg
+            x, y, walk, phase = float(p0[0]), float(p0[1]), 0.0, 0.0
+            yaw = float(wrap_angle(yaw + 0.05 * math.sin(0.7 * tau)))  # a little sway
+        joints = skeleton(x, y, yaw, phase, walk, a.height_m, a.width_scale)
+        return PersonState(x, y, float(wrap_angle(yaw)), joints)
+
+
+class World:
+    """People moving through a site, as a pure function of time.
+
+    Args:
+        site: the site (floor polygon, obstacles, cameras).
+        num_people: how many people.
+        seed: every person's body, clothes and plan follow from it.
+        period_s: each person's plan repeats after about this long.
+    """
+
+    def __init__(self, site: Site, num_people: int = 3, seed: int = 0, period_s: float = 600.0):
+        if not 0 <= num_people <= 64:
+            raise ValueError(f"num_people must be in [0, 64], got {num_people}")
+        self.site = site
+        self.seed = seed
+        rng = np.random.default_rng([seed, 0x5B0D])
+        hues = _distinct_hues(rng, num_people)
+        self.people = []
+        for k in range(num_people):
+            p = SimPerson(site, np.random.default_rng([seed, k]), period_s)
+            p.appearance = _recolour(p.appearance, hues[k], rng)
+            self.people.append(p)
+
+    def states(self, t_s: float) -> list[PersonState]:
+        """Every person's state at absolute time ``t_s`` (seconds)."""
+        return [p.state(t_s) for p in self.people]
+
+
+# -- rendering what a camera's detector reports ------------------------------------------------------
+
+
+def render_views(
+    states: list[PersonState],
+    appearances: list[Appearance],
+    cam: Camera,
+    rng: np.random.Generator,
+    noise: NoiseModel = NoiseModel(),
+    site: Site | None = None,
+    lighting: Lighting = Lighting(),
+    histograms: bool = True,
+    depth: bool = False,
+) -> list[tuple[int, PersonView]]:
+    """What one camera's detector reports for one frame.
+
+    Args:
+        states: every person in the world at the frame's time.
+        appearances: their appearances, same order.
+        cam: the camera.
+        rng: randomness for this frame (seed it from (seed, camera, frame) for repeatability).
+        noise: detector noise model.
+        site: for obstacle occlusion (None: no obstacles).
+        lighting: the camera's colour rendering.
+        histograms: compute colour histograms (training does not need them).
+        depth: also report camera-frame 3D joints (depth cameras).
+
+    Returns:
+        ``(person index, view)`` pairs; index -1 marks a spurious detection.
+    """
+    out: list[tuple[int, PersonView]] = []
+    centres = np.array([[s.x, s.y] for s in states]).reshape(-1, 2)
+    heights = np.array([s.joints[:, 2].max() + 0.1 for s in states])
+    for k, st in enumerate(states):
+        uv, z = project(st.joints, cam)  # (17, 2), (17,)
+        # Latent confidence of each joint, thresholded like the real detector.
+        score = rng.normal(noise.score_mean, noise.score_std, size=body.NUM_KEYPOINTS)
+        to_person = np.array([st.x, st.y]) - cam.t[:2]
+        dist = float(np.linalg.norm(to_person))
+        view_dir = to_person / max(dist, 1e-6)
+        facing = np.array([math.cos(st.yaw), math.sin(st.yaw)])
+        left = np.array([-facing[1], facing[0]])
+        side = np.zeros(body.NUM_KEYPOINTS)
+        side[_LEFT], side[_RIGHT] = 1.0, -1.0
+        # Joints on the side turned away from the camera are partly hidden by the torso.
+        far = side * float(left @ view_dir) > 0.25
+        score -= noise.far_side_penalty * far * abs(float(left @ view_dir))
+        # Seen from behind, the face is not seen.
+        away = float(facing @ view_dir)
+        if away > 0:
+            score[_FACE] -= noise.face_away_penalty * away
+        score -= noise.distance_penalty * max(0.0, dist - 3.0)
+        edge_px = np.minimum.reduce([uv[:, 0], cam.width - uv[:, 0], uv[:, 1], cam.height - uv[:, 1]])
+        score -= np.clip((noise.border_px - edge_px) / max(noise.border_px, 1e-6), 0.0, 1.0) * 0.3
+        inside = (z > 0.1) & (uv[:, 0] >= 0) & (uv[:, 0] < cam.width) & (uv[:, 1] >= 0) & (uv[:, 1] < cam.height)
+        occluded = _occluded(cam.t, st.joints, k, centres, heights, site)
+        keep_occluded = rng.uniform(size=body.NUM_KEYPOINTS) < noise.occluded_keep
+        score = np.where(occluded, score - 0.2, score)
+        visible = inside & (~occluded | keep_occluded) & (score >= noise.score_threshold)
+        if visible.sum() < max(noise.min_joints, 1):
+            continue
+        # Pixel noise grows with the person's apparent size (closer = bigger errors in pixels).
+        sigma = noise.pixel_noise_px * 3.0 / np.maximum(z, 0.5)
+        uv_noisy = uv + rng.normal(size=uv.shape) * sigma[:, None]
+        kp = np.full((body.NUM_KEYPOINTS, 3), np.nan, dtype=np.float32)
+        kp[visible, :2] = uv_noisy[visible]
+        kp[visible, 2] = np.clip(score[visible], noise.score_threshold, 1.0)
+        p3d = None
+        if depth:
+            pc = world_to_camera(st.joints, cam)
+            pc *= 1 + rng.normal(size=(body.NUM_KEYPOINTS, 1)) * noise.depth_noise_m
+            p3d = np.where(visible[:, None], pc, np.nan).astype(np.float32)
+        if rng.uniform() < noise.swap_prob:
+            kp[_LEFT], kp[_RIGHT] = kp[_RIGHT].copy(), kp[_LEFT].copy()
+            if p3d is not None:
+                p3d[_LEFT], p3d[_RIGHT] = p3d[_RIGHT].copy(), p3d[_LEFT].copy()
+        bbox = _bbox(kp, cam)
+        hist = _person_histogram(appearances[k], kp, lighting, rng) if histograms else np.zeros((16, 8), np.float32)
+        out.append((k, PersonView(keypoints=kp, bbox=bbox, histogram=hist, points3d=p3d)))
+    if rng.uniform() < noise.spurious_prob:
+        out.append((-1, _spurious_view(cam, rng, lighting, histograms, depth)))
+    return out
+
+
+class SimCamera:
+    """A simulated camera: turns world time into Observations for one camera of a world.
+
+    The noise of each frame is seeded from (world seed, camera index, frame number), so a run
+    is repeatable.
+    """
+
+    def __init__(self, world: World, camera_id: str, noise: NoiseModel = NoiseModel(), depth: bool = False):
+        self.world = world
+        self.camera = world.site.camera(camera_id)
+        self.index = world.site.camera_index(camera_id)
+        self.noise = noise
+        self.depth = depth
+        lrng = np.random.default_rng([world.seed, 0x11, self.index])
+        self.lighting = Lighting(
+            gain=float(lrng.uniform(0.75, 1.15)),
+            hue_shift=float(lrng.normal(0, 1.5)),
+            sat_gain=float(lrng.uniform(0.88, 1.08)),
+            background_hsv=(int(lrng.integers(0, 180)), int(lrng.integers(10, 60)), int(lrng.integers(90, 210))),
+        )
+        self.seq = 0
+
+    def frame_index(self, stamp_ns: int) -> int:
+        return int(round(stamp_ns * 1e-9 * self.camera.fps))
+
+    def observe(self, stamp_ns: int) -> tuple[Observation, list[int]]:
+        """The Observation at capture time ``stamp_ns`` and the true person index of each view."""
+        states = self.world.states(stamp_ns * 1e-9)
+        rng = np.random.default_rng([self.world.seed, self.index, self.frame_index(stamp_ns)])
+        views = render_views(
+            states, [p.appearance for p in self.world.people], self.camera, rng, self.noise,
+            self.world.site, self.lighting, histograms=True, depth=self.depth,
+        )
+        obs = Observation(
+            site=self.world.site.name, camera=self.camera.id, seq=self.seq, stamp_ns=int(stamp_ns),
+            width=self.camera.width, height=self.camera.height, people=tuple(v for _, v in views),
+        )
+        self.seq += 1
+        return obs, [k for k, _ in views]
+
+
+# -- helpers -----------------------------------------------------------------------------------
+
+
+def _random_appearance(rng: np.random.Generator, height_m: float) -> Appearance:
+    return Appearance(
+        height_m=height_m,
+        width_scale=float(np.clip(rng.normal(1.0, 0.08), 0.8, 1.25)),
+        shirt_hsv=(int(rng.integers(0, 180)), int(rng.integers(90, 240)), int(rng.integers(90, 230))),
+        trousers_hsv=(int(rng.integers(0, 180)), int(rng.integers(20, 200)), int(rng.integers(40, 180))),
+        skin_hsv=(int(rng.integers(5, 20)), int(rng.integers(60, 150)), int(rng.integers(90, 220))),
+    )
+
+
+def _distinct_hues(rng: np.random.Generator, n: int) -> list[int]:
+    """Shirt hues spread around the colour wheel so that simulated people are told apart."""
+    start = int(rng.integers(0, 180))
+    return [(start + (180 * k) // max(n, 1)) % 180 for k in range(n)]
+
+
+def _recolour(a: Appearance, hue: int, rng: np.random.Generator) -> Appearance:
+    trousers_hue = (hue + int(rng.integers(30, 150))) % 180
+    return Appearance(
+        a.height_m, a.width_scale, (hue, int(rng.integers(140, 240)), a.shirt_hsv[2]),
+        (trousers_hue, a.trousers_hsv[1], a.trousers_hsv[2]), a.skin_hsv,
+    )
+
+
+def _inside_polygon(p: NDArray, poly: NDArray) -> bool:
+    return cv2.pointPolygonTest(poly.astype(np.float32).reshape(-1, 1, 2), (float(p[0]), float(p[1])), True) >= _PERSON_RADIUS_M + 0.1
+
+
+def _in_obstacle(p: NDArray, site: Site, margin: float = _PERSON_RADIUS_M + 0.1) -> bool:
+    return any(o.min[0] - margin <= p[0] <= o.max[0] + margin and o.min[1] - margin <= p[1] <= o.max[1] + margin for o in site.obstacles)
+
+
+def _random_free_point(site: Site, rng: np.random.Generator) -> NDArray:
+    poly = np.asarray(site.floor)
+    lo, hi = poly.min(0), poly.max(0)
+    for _ in range(10_000):
+        p = rng.uniform(lo, hi)
+        if _inside_polygon(p, poly) and not _in_obstacle(p, site):
+            return p
+    raise ValueError(f"site {site.name!r}: no free floor point found (floor too small or covered by obstacles)")
+
+
+def _segment_free(site: Site, a: NDArray, b: NDArray) -> bool:
+    poly = np.asarray(site.floor)
+    n = max(2, int(np.linalg.norm(b - a) / 0.1))
+    return all(_inside_polygon(p, poly) and not _in_obstacle(p, site) for p in np.linspace(a, b, n))
+
+
+def _random_reachable(site: Site, rng: np.random.Generator, pos: NDArray, max_dist: float = 1e9) -> NDArray | None:
+    for _ in range(50):
+        target = _random_free_point(site, rng)
+        d = target - pos
+        n = float(np.linalg.norm(d))
+        if n > max_dist:
+            target = pos + d * (max_dist / n) * rng.uniform(0.3, 1.0)
+        if np.linalg.norm(target - pos) > 0.3 and _segment_free(site, pos, target):
+            return target
+    return None
+
+
+def _occluded(origin: NDArray, joints: NDArray, k: int, centres: NDArray, heights: NDArray, site: Site | None) -> NDArray[np.bool_]:
+    """(17,) whether the segment from the camera to each joint is blocked by an obstacle or another person."""
+    d = joints - origin  # (17, 3)
+    hidden = np.zeros(len(joints), dtype=bool)
+    # Other people as vertical cylinders.
+    for q in range(len(centres)):
+        if q == k:
+            continue
+        oq = centres[q] - origin[:2]  # (2,)
+        dd = (d[:, :2] ** 2).sum(1)  # (17,)
+        s = np.clip((d[:, :2] @ oq) / np.maximum(dd, 1e-9), 0.0, 1.0)  # closest approach along each segment
+        closest = s[:, None] * d[:, :2] - oq
+        zs = origin[2] + s * d[:, 2]
+        hidden |= (np.linalg.norm(closest, axis=1) < _PERSON_RADIUS_M) & (s < 0.9) & (zs < heights[q])
+    if site is not None:
+        for o in site.obstacles:
+            # Slab test on the segment origin + s d, s in [0, 1).
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t1 = (np.asarray(o.min) - origin) / d
+                t2 = (np.asarray(o.max) - origin) / d
+            tmin = np.nanmax(np.minimum(t1, t2), axis=1)
+            tmax = np.nanmin(np.maximum(t1, t2), axis=1)
+            hidden |= (tmax >= np.maximum(tmin, 0.0)) & (tmin < 0.98)
+    return hidden
+
+
+def _bbox(kp: NDArray, cam: Camera) -> NDArray[np.float32]:
+    v = kp[~np.isnan(kp[:, 0]), :2]
+    lo, hi = v.min(0), v.max(0)
+    pad = 0.1 * (hi - lo) + 8.0
+    lo = np.maximum(lo - pad, 0.0)
+    hi = np.minimum(hi + pad, [cam.width - 1, cam.height - 1])
+    return np.array([lo[0], lo[1], hi[0], hi[1]], dtype=np.float32)
+
+
+def _person_histogram(a: Appearance, kp: NDArray, light: Lighting, rng: np.random.Generator) -> NDArray[np.float32]:
+    """HS histogram of a synthetic 32-pixel-wide patch: head, shirt and trousers where their
+    joints are visible, plus background at the sides, under the camera's lighting, through the
+    real colour code."""
+    vis = ~np.isnan(kp[:, 0])
+    rows: list[tuple[tuple[int, int, int], int]] = []
+    if vis[:5].any():
+        rows.append((a.skin_hsv, 8))
+    if vis[5:11].any():
+        rows.append((a.shirt_hsv, 28))
+    if vis[11:].any():
+        rows.append((a.trousers_hsv, 28))
+    h = sum(n for _, n in rows)
+    patch = np.empty((h, 32, 3), dtype=np.float32)
+    r = 0
+    for hsv, n in rows:
+        patch[r : r + n] = hsv
+        r += n
+    # Background shows at the sides of the box.
+    patch[:, :3] = light.background_hsv
+    patch[:, 29:] = light.background_hsv
+    hsv = patch + rng.normal(size=patch.shape) * [3.0, 22.0, 20.0]  # texture, folds, shading
+    hsv[..., 0] = np.mod(hsv[..., 0] + light.hue_shift, 180)
+    hsv[..., 1] = np.clip(hsv[..., 1] * light.sat_gain, 0, 255)
+    hsv[..., 2] = np.clip(hsv[..., 2] * light.gain, 0, 255)
+    bgr = cv2.cvtColor(hsv.astype(np.uint8), cv2.COLOR_HSV2BGR)
+    return hs_histogram(bgr)
+
+
+def _spurious_view(cam: Camera, rng: np.random.Generator, light: Lighting, histograms: bool, depth: bool) -> PersonView:
+    """A false detection: a few low-confidence joints clustered somewhere in the image."""
+    kp = np.full((body.NUM_KEYPOINTS, 3), np.nan, dtype=np.float32)
+    n = int(rng.integers(2, 7))
+    idx = rng.choice(body.NUM_KEYPOINTS, size=n, replace=False)
+    centre = rng.uniform([40, 40], [cam.width - 40, cam.height - 40])
+    kp[idx, :2] = centre + rng.normal(size=(n, 2)) * 25
+    kp[idx, :2] = np.clip(kp[idx, :2], 0, [cam.width - 1, cam.height - 1])
+    kp[idx, 2] = rng.uniform(0.5, 0.65, size=n)
+    hist = np.zeros((16, 8), np.float32)
+    if histograms:
+        bg = np.asarray(light.background_hsv, np.float32)
+        hsv = np.clip(bg + rng.normal(size=(16, 16, 3)) * [6, 20, 20], 0, [179, 255, 255]).astype(np.uint8)
+        hist = hs_histogram(cv2.cvtColor(hsv, cv2.COLOR_HSV2BGR))
+    p3d = np.where(np.isnan(kp[:, :1]), np.nan, rng.uniform(1, 5, size=(body.NUM_KEYPOINTS, 3))).astype(np.float32) if depth else None
+    return PersonView(keypoints=kp, bbox=_bbox(kp, cam), histogram=hist, points3d=p3d)
