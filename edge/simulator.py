@@ -69,36 +69,50 @@ def wrap_angle(a: NDArray | float) -> NDArray | float:
 
 @dataclass(frozen=True)
 class NoiseModel:
-    """What a real 2D pose detector does to the truth. Defaults tuned against WheresTheFellow.
+    """What a real 2D pose detector does to the truth. Defaults tuned against WheresTheFellow
+    (``scripts/sim_vs_dataset.py`` prints the comparison).
+
+    Whether a joint is reported and the confidence it is reported with are drawn separately:
+    in the real data often-missed joints (wrists, faces) still come with high scores.
 
     Attributes:
-        pixel_noise_px: std of Gaussian pixel noise at 3 m; grows with the joint's apparent size.
-        score_mean: mean latent confidence of a clearly visible joint.
-        score_std: std of the latent confidence.
-        score_threshold: joints below this confidence are not reported (OpenPifPaf used 0.5).
-        far_side_penalty: confidence lost by a joint on the side of the body facing away.
-        face_away_penalty: confidence lost by face joints when the person faces away.
-        distance_penalty: confidence lost per metre beyond 3 m.
-        border_px: joints within this many pixels of the image border lose confidence.
+        pixel_noise_px: std of Gaussian pixel noise at 3 m; grows as the person comes closer.
+        joint_rate: per-joint probability (COCO order) that a clearly visible joint is reported.
+        view_quality_std: std of a detection-probability change shared by all joints of a view
+            (blur, lighting, pose): views are good or bad as a whole.
+        far_side_drop: detection probability lost by joints on the side turned away.
+        face_away_drop: detection probability lost by the face when the person faces away.
+        distance_drop: detection probability lost per metre beyond 3 m.
+        border_px: joints within this many pixels of the image border are found less often.
         occluded_keep: probability that a joint hidden by an obstacle or a person is still
-            reported (detectors hallucinate plausible joints), with lowered confidence.
+            reported (detectors hallucinate plausible joints).
+        score_mean, score_std: the reported confidence of a detected joint, before clipping to
+            [score_threshold, 1].
+        score_threshold: nothing below this confidence is reported (OpenPifPaf used 0.5).
         swap_prob: probability that a view has its left and right joints swapped.
         spurious_prob: probability per frame of a spurious partial person.
+        view_miss_prob: probability that the detector misses a person entirely in a view.
+        truncated_miss_prob: extra miss probability for a person whose joints are all out of
+            the image, scaled by the fraction that is out.
         min_joints: a person is reported only with at least this many joints.
         depth_noise_m: std of the depth noise of 3D points, per metre of depth.
     """
 
     pixel_noise_px: float = 2.5
-    score_mean: float = 0.82
-    score_std: float = 0.11
-    score_threshold: float = 0.5
-    far_side_penalty: float = 0.12
-    face_away_penalty: float = 0.45
-    distance_penalty: float = 0.03
+    joint_rate: tuple[float, ...] = (0.66, 0.5, 0.5, 0.56, 0.56, 1.0, 1.0, 0.86, 0.86, 0.66, 0.66, 1.0, 1.0, 0.99, 0.99, 0.95, 0.95)
+    view_quality_std: float = 0.06
+    far_side_drop: float = 0.15
+    face_away_drop: float = 0.8
+    distance_drop: float = 0.05
     border_px: float = 12.0
     occluded_keep: float = 0.15
+    score_mean: float = 0.805
+    score_std: float = 0.105
+    score_threshold: float = 0.5
     swap_prob: float = 0.03
     spurious_prob: float = 0.01
+    view_miss_prob: float = 0.2
+    truncated_miss_prob: float = 0.3
     min_joints: int = 1
     depth_noise_m: float = 0.01
 
@@ -349,8 +363,8 @@ def render_views(
     heights = np.array([s.joints[:, 2].max() + 0.1 for s in states])
     for k, st in enumerate(states):
         uv, z = project(st.joints, cam)  # (17, 2), (17,)
-        # Latent confidence of each joint, thresholded like the real detector.
-        score = rng.normal(noise.score_mean, noise.score_std, size=body.NUM_KEYPOINTS)
+        quality = rng.normal(0.0, noise.view_quality_std)
+        p = np.clip(np.asarray(noise.joint_rate) + quality, 0.0, 1.0)  # (17,) detection probability
         to_person = np.array([st.x, st.y]) - cam.t[:2]
         dist = float(np.linalg.norm(to_person))
         view_dir = to_person / max(dist, 1e-6)
@@ -359,22 +373,23 @@ def render_views(
         side = np.zeros(body.NUM_KEYPOINTS)
         side[_LEFT], side[_RIGHT] = 1.0, -1.0
         # Joints on the side turned away from the camera are partly hidden by the torso.
-        far = side * float(left @ view_dir) > 0.25
-        score -= noise.far_side_penalty * far * abs(float(left @ view_dir))
+        turned = float(left @ view_dir)
+        p *= 1.0 - noise.far_side_drop * (side * turned > 0.25) * abs(turned)
         # Seen from behind, the face is not seen.
         away = float(facing @ view_dir)
         if away > 0:
-            score[_FACE] -= noise.face_away_penalty * away
-        score -= noise.distance_penalty * max(0.0, dist - 3.0)
+            p[_FACE] *= 1.0 - noise.face_away_drop * away
+        p *= max(0.0, 1.0 - noise.distance_drop * max(0.0, dist - 3.0))
         edge_px = np.minimum.reduce([uv[:, 0], cam.width - uv[:, 0], uv[:, 1], cam.height - uv[:, 1]])
-        score -= np.clip((noise.border_px - edge_px) / max(noise.border_px, 1e-6), 0.0, 1.0) * 0.3
+        p *= 1.0 - 0.5 * np.clip((noise.border_px - edge_px) / max(noise.border_px, 1e-6), 0.0, 1.0)
         inside = (z > 0.1) & (uv[:, 0] >= 0) & (uv[:, 0] < cam.width) & (uv[:, 1] >= 0) & (uv[:, 1] < cam.height)
         occluded = _occluded(cam.t, st.joints, k, centres, heights, site)
-        keep_occluded = rng.uniform(size=body.NUM_KEYPOINTS) < noise.occluded_keep
-        score = np.where(occluded, score - 0.2, score)
-        visible = inside & (~occluded | keep_occluded) & (score >= noise.score_threshold)
-        if visible.sum() < max(noise.min_joints, 1):
+        p = np.where(occluded, p * noise.occluded_keep, p)
+        visible = inside & (rng.uniform(size=body.NUM_KEYPOINTS) < p)
+        miss = noise.view_miss_prob + noise.truncated_miss_prob * (1.0 - inside.mean())
+        if visible.sum() < max(noise.min_joints, 1) or rng.uniform() < miss:
             continue
+        score = rng.normal(noise.score_mean + 0.5 * quality, noise.score_std, size=body.NUM_KEYPOINTS)
         # Pixel noise grows with the person's apparent size (closer = bigger errors in pixels).
         sigma = noise.pixel_noise_px * 3.0 / np.maximum(z, 0.5)
         uv_noisy = uv + rng.normal(size=uv.shape) * sigma[:, None]

@@ -55,7 +55,7 @@ def processes():
     procs.stop_all()
 
 
-@pytest.fixture
+@pytest.fixture(scope="session")
 def dev_json() -> Path:
     assert DEV_JSON.is_file(), f"the WheresTheFellow dev split is expected at {DEV_JSON} (see README)"
     return DEV_JSON

@@ -104,9 +104,9 @@ def _one_person_at(site, x, y, yaw):
 
 # (noise model, check on the rendered views)
 NOISE_CASES = [
-    (NoiseModel(swap_prob=1.0, pixel_noise_px=0.0, score_std=0.0), "swapped"),  # every view mirrored
-    (NoiseModel(spurious_prob=1.0), "spurious"),  # a false person each frame
-    (NoiseModel(score_threshold=0.99, score_std=0.0), "nothing"),  # too strict a detector
+    (NoiseModel(swap_prob=1.0, pixel_noise_px=0.0, view_miss_prob=0.0), "swapped"),  # every view mirrored
+    (NoiseModel(spurious_prob=1.0, view_miss_prob=0.0), "spurious"),  # a false person each frame
+    (NoiseModel(joint_rate=(0.0,) * 17, view_quality_std=0.0), "nothing"),  # a detector that finds no joint
 ]
 
 
@@ -132,7 +132,8 @@ def test_obstacle_hides_joints_behind_it(site):
     # person just west of it; with no occluded joints kept, the legs vanish.
     states, apps = _one_person_at(site, 4.1, 4.6, 0.0)
     cam = site.camera("ne")
-    noise = NoiseModel(occluded_keep=0.0, score_std=0.0, far_side_penalty=0, face_away_penalty=0)
+    noise = NoiseModel(occluded_keep=0.0, joint_rate=(1.0,) * 17, view_quality_std=0.0, view_miss_prob=0.0,
+                       truncated_miss_prob=0.0, far_side_drop=0.0, face_away_drop=0.0)
     seen = render_views(states, apps, cam, np.random.default_rng(0), noise, site)
     free = render_views(states, apps, cam, np.random.default_rng(0), noise, None)
     assert free and free[0][1].num_visible > (seen[0][1].num_visible if seen else 0)

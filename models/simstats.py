@@ -1,0 +1,57 @@
+"""How closely the simulator's detector output matches a real WheresTheFellow file.
+
+``scripts/sim_vs_dataset.py`` prints the comparison; the tests keep it from drifting.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from tqdm import tqdm
+
+from edge import body
+from edge.simulator import NoiseModel, SimCamera, World
+from edge.site import load_site
+
+__all__ = ["statistics", "simulate"]
+
+
+def statistics(samples: list[dict]) -> dict:
+    """samples: list of {camera id: (17, 3) keypoints} for one person."""
+    views = [kp for s in samples for kp in s.values()]
+    vis = np.array([~np.isnan(kp[:, 0]) for kp in views])  # (V, 17)
+    jpv = vis.sum(1)
+    scores = np.concatenate([kp[~np.isnan(kp[:, 0]), 2] for kp in views])
+    vps = np.bincount([len(s) for s in samples], minlength=4)[1:4] / len(samples)
+    return {
+        "samples": len(samples),
+        "views": len(views),
+        "joints_per_view_mean": float(jpv.mean()),
+        "joints_per_view_median": float(np.median(jpv)),
+        "joints_per_view_buckets": {k: float(np.mean((jpv >= lo) & (jpv <= hi))) for k, (lo, hi) in
+                                    {"1-4": (1, 4), "5-8": (5, 8), "9-12": (9, 12), "13-17": (13, 17)}.items()},
+        "views_per_person": {str(k + 1): float(v) for k, v in enumerate(vps)},
+        "joints_per_person_median": float(np.median([sum(int((~np.isnan(kp[:, 0])).sum()) for kp in s.values()) for s in samples])),
+        "score_quantiles": {q: float(np.quantile(scores, float(q))) for q in ("0.05", "0.25", "0.5", "0.75", "0.95")},
+        "score_is_1": float(np.mean(scores >= 0.999)),
+        "joint_rate": {name: float(vis[:, i].mean()) for i, name in enumerate(body.KEYPOINTS)},
+    }
+
+
+def simulate(site_path: str, seconds: float, seed: int, rate_hz: float, noise: NoiseModel = NoiseModel(), progress: bool = True) -> list[dict]:
+    """One simulated person seen by the site's cameras at ``rate_hz``; instants with no view are left out."""
+    site = load_site(site_path)
+    world = World(site, 1, seed)
+    cams = [SimCamera(world, c, noise) for c in site.camera_ids]
+    out = []
+    t0 = 1.7e9
+    for k in tqdm(range(int(seconds * rate_hz)), desc="simulating", unit="sample", leave=False, disable=not progress):
+        t_ns = int((t0 + k / rate_hz) * 1e9)
+        s = {}
+        for cam in cams:
+            obs, who = cam.observe(t_ns)
+            for i, v in zip(who, obs.people):
+                if i == 0:
+                    s[cam.camera.id] = v.keypoints
+        if s:
+            out.append(s)
+    return out

@@ -1,0 +1,65 @@
+"""Compare the simulator's detector statistics with a WheresTheFellow file, side by side.
+
+    python scripts/sim_vs_dataset.py [--dataset ../shared/datasets/wheresthefellow/dev.json]
+        [--site deploy/sites/wtf-apartment.toml] [--seconds 600] [--seed 0] [--json-out F]
+
+Simulates one person (as in the recordings) walking through the site, sampled at the dataset's
+rate, keeps the instants at which at least one camera reports the person (the dataset holds
+only those), and prints joints per view, views per person, scores and per-joint detection rates.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from edge import body  # noqa: E402
+from models.simstats import simulate, statistics  # noqa: E402
+from models.wtf import load_wtf  # noqa: E402
+
+
+def _row(name: str, a: float, b: float, fmt: str = "{:.3f}") -> str:
+    return f"  {name:<26}{fmt.format(a):>12}{fmt.format(b):>12}"
+
+
+def main(dataset: str, site: str, seconds: float, seed: int, json_out: str | None) -> int:
+    real = [{c: v.keypoints for c, v in s.views.items()} for s in load_wtf(dataset)]
+    ts = [s.stamp_ns for s in load_wtf(dataset)]
+    rate = (len(ts) - 1) / ((ts[-1] - ts[0]) * 1e-9)
+    sim = simulate(site, seconds, seed, rate)
+    a, b = statistics(real), statistics(sim)
+    print(f"{'':28}{'dev.json':>12}{'simulator':>12}")
+    print(_row("samples", a["samples"], b["samples"], "{:.0f}"))
+    print(_row("views", a["views"], b["views"], "{:.0f}"))
+    print(_row("joints/view mean", a["joints_per_view_mean"], b["joints_per_view_mean"], "{:.2f}"))
+    print(_row("joints/view median", a["joints_per_view_median"], b["joints_per_view_median"], "{:.0f}"))
+    for k in a["joints_per_view_buckets"]:
+        print(_row(f"views with {k} joints", a["joints_per_view_buckets"][k], b["joints_per_view_buckets"][k]))
+    for k in a["views_per_person"]:
+        print(_row(f"persons seen by {k} camera(s)", a["views_per_person"][k], b["views_per_person"][k]))
+    print(_row("joints/person median", a["joints_per_person_median"], b["joints_per_person_median"], "{:.0f}"))
+    for q in a["score_quantiles"]:
+        print(_row(f"score quantile {q}", a["score_quantiles"][q], b["score_quantiles"][q]))
+    print(_row("score == 1", a["score_is_1"], b["score_is_1"]))
+    print("  detection rate per joint:")
+    for name in body.KEYPOINTS:
+        print(_row(f"  {name}", a["joint_rate"][name], b["joint_rate"][name], "{:.2f}"))
+    if json_out:
+        Path(json_out).write_text(json.dumps({"dev": a, "sim": b}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--dataset", default=str(ROOT.parent / "shared" / "datasets" / "wheresthefellow" / "dev.json"))
+    p.add_argument("--site", default=str(ROOT / "deploy" / "sites" / "wtf-apartment.toml"))
+    p.add_argument("--seconds", type=float, default=600.0)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json-out")
+    a = p.parse_args()
+    sys.exit(main(a.dataset, a.site, a.seconds, a.seed, a.json_out))
