@@ -1,0 +1,119 @@
+"""The analytic estimator: torso pose from geometry alone, no learning.
+
+The baseline every learned model is compared against, and the host's fallback when no model
+fits the site. For one person's views:
+
+1. each joint seen by two or more cameras is triangulated (the point closest to all its rays);
+   a joint seen by one camera is put where its ray reaches the joint's typical height
+   (edge.body.TYPICAL_HEIGHT_M);
+2. position: the mean of the torso joints (shoulders, hips) on the floor, or of all joints if
+   no torso joint was seen;
+3. yaw: perpendicular to the left-right shoulder and hip lines (pointing to the body's front),
+   averaged as vectors; with neither pair, from the nose against the ears/eyes; else 0.
+
+An optional forward offset moves the reported point in front of the torso centre (to match
+ground truth measured by a chest-worn tracker, see docs/dataset.md).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from edge import body
+from edge.camera import intersect_plane, pixel_to_ray
+from edge.observation import PersonView
+from edge.site import Site
+
+__all__ = ["AnalyticEstimator", "triangulate", "joints_3d"]
+
+_HEIGHTS = np.asarray(body.TYPICAL_HEIGHT_M)
+_PAIRS = ((body.LEFT_SHOULDER, body.RIGHT_SHOULDER), (body.LEFT_HIP, body.RIGHT_HIP))
+_HEAD = (1, 2, 3, 4)  # eyes and ears
+
+
+def triangulate(origins: NDArray, directions: NDArray) -> NDArray[np.float64]:
+    """The point closest (least squares) to several rays.
+
+    Args:
+        origins: (K, 3) ray origins.
+        directions: (K, 3) unit directions.
+
+    Returns:
+        (3,) point minimising the sum of squared distances to the rays.
+    """
+    # sum_k (I - d_k d_k^T) p = sum_k (I - d_k d_k^T) o_k
+    P = np.eye(3)[None] - directions[:, :, None] * directions[:, None, :]  # (K, 3, 3)
+    A = P.sum(0)
+    b = (P @ origins[:, :, None]).sum(0)[:, 0]
+    return np.linalg.lstsq(A, b, rcond=None)[0]
+
+
+def joints_3d(views: Mapping[str, PersonView], site: Site) -> NDArray[np.float64]:
+    """(17, 3) world joints of one person from its views; NaN rows for joints no camera saw."""
+    rays: list[list[tuple[NDArray, NDArray]]] = [[] for _ in range(body.NUM_KEYPOINTS)]
+    for cam_id, view in views.items():
+        cam = site.camera(cam_id)
+        vis = np.flatnonzero(view.visible)
+        if len(vis) == 0:
+            continue
+        origin, dirs = pixel_to_ray(view.keypoints[vis, :2].astype(np.float64), cam)
+        for j, d in zip(vis, dirs):
+            rays[j].append((origin, d))
+    out = np.full((body.NUM_KEYPOINTS, 3), np.nan)
+    for j, rs in enumerate(rays):
+        if len(rs) >= 2:
+            o = np.array([r[0] for r in rs])
+            d = np.array([r[1] for r in rs])
+            # Nearly parallel rays triangulate badly: fall back to the typical height then.
+            if np.linalg.norm(np.cross(d[0], d[1:]), axis=1).max() > 0.05:
+                out[j] = triangulate(o, d)
+                continue
+        if rs:
+            pts, ok = intersect_plane(np.array([r[0] for r in rs]), np.array([r[1] for r in rs]), _HEIGHTS[j])
+            if ok.any():
+                out[j] = pts[ok].mean(0)
+    return out
+
+
+class AnalyticEstimator:
+    """Torso pose from per-view geometry; implements the host's ``Estimator`` protocol.
+
+    Args:
+        site: the site (camera models).
+        forward_offset_m: report the point this far in front of the torso centre.
+    """
+
+    def __init__(self, site: Site, forward_offset_m: float = 0.0):
+        self.site = site
+        self.forward_offset_m = forward_offset_m
+
+    def estimate(self, view_sets: Sequence[Mapping[str, PersonView]]) -> NDArray[np.float64]:
+        """(B, 3) x, y, yaw for each person's views."""
+        out = np.zeros((len(view_sets), 3))
+        for i, views in enumerate(view_sets):
+            out[i] = self._one(views)
+        return out
+
+    def _one(self, views: Mapping[str, PersonView]) -> NDArray[np.float64]:
+        j = joints_3d(views, self.site)
+        seen = ~np.isnan(j[:, 0])
+        if not seen.any():
+            return np.array([np.nan, np.nan, 0.0])
+        torso = [t for t in body.TORSO if seen[t]]
+        centre = j[torso, :2].mean(0) if torso else j[seen, :2].mean(0)
+        facing = np.zeros(2)
+        for left, right in _PAIRS:
+            if seen[left] and seen[right]:
+                lr = j[left, :2] - j[right, :2]
+                facing += np.array([lr[1], -lr[0]])  # the left-to-right vector turned -90 degrees
+        if not facing.any() and seen[body.NOSE]:
+            head = [h for h in _HEAD if seen[h]]
+            if head:
+                facing = j[body.NOSE, :2] - j[head, :2].mean(0)
+        yaw = math.atan2(facing[1], facing[0]) if facing.any() else 0.0
+        xy = centre + self.forward_offset_m * np.array([math.cos(yaw), math.sin(yaw)])
+        return np.array([xy[0], xy[1], yaw])
