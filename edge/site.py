@@ -116,7 +116,7 @@ def _vector(value: Any, field: str, n: int, *, path: str = "", lo: float = -1e4,
 
 
 def _name(value: Any, field: str, *, path: str = "") -> str:
-    if not isinstance(value, str) or not NAME_RE.match(value):
+    if not isinstance(value, str) or not NAME_RE.fullmatch(value):
         raise SiteError(f"{_where(path, field)} must be 1-64 characters of letters, digits, '_' or '-', got {value!r}")
     return value
 

@@ -39,19 +39,35 @@ DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 Mode = Literal["peer", "client", "router"]
 
 
+def _checked(site: str, camera: str | None = None) -> None:
+    """Names become key chunks: reject anything that is not a valid site/camera id ("*" matches all cameras)."""
+    from edge.site import NAME_RE
+
+    for field, value in (("site", site), ("camera", camera)):
+        if value is None or (field == "camera" and value == "*"):
+            continue
+        if not (isinstance(value, str) and NAME_RE.fullmatch(value)):
+            raise ValueError(f"{field} must be 1-64 characters of letters, digits, '_' or '-', got {value!r}")
+
+
 def observation_key(site: str, camera: str = "*") -> str:
+    """Key of a camera's Observations; the default ``camera="*"`` matches every camera."""
+    _checked(site, camera)
     return f"superbody/{site}/cameras/{camera}/observations"
 
 
 def camera_alive_key(site: str, camera: str = "*") -> str:
+    _checked(site, camera)
     return f"superbody/{site}/cameras/{camera}/alive"
 
 
 def people_key(site: str) -> str:
+    _checked(site)
     return f"superbody/{site}/people"
 
 
 def host_alive_key(site: str) -> str:
+    _checked(site)
     return f"superbody/{site}/host/alive"
 
 
