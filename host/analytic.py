@@ -10,9 +10,6 @@ fits the site. For one person's views:
    no torso joint was seen;
 3. yaw: perpendicular to the left-right shoulder and hip lines (pointing to the body's front),
    averaged as vectors; with neither pair, from the nose against the ears/eyes; else 0.
-
-An optional forward offset moves the reported point in front of the torso centre (to match
-ground truth measured by a chest-worn tracker, see docs/dataset.md).
 """
 
 from __future__ import annotations
@@ -84,12 +81,10 @@ class AnalyticEstimator:
 
     Args:
         site: the site (camera models).
-        forward_offset_m: report the point this far in front of the torso centre.
     """
 
-    def __init__(self, site: Site, forward_offset_m: float = 0.0):
+    def __init__(self, site: Site):
         self.site = site
-        self.forward_offset_m = forward_offset_m
 
     def estimate(self, view_sets: Sequence[Mapping[str, PersonView]]) -> NDArray[np.float64]:
         """(B, 3) x, y, yaw for each person's views."""
@@ -115,5 +110,4 @@ class AnalyticEstimator:
             if head:
                 facing = j[body.NOSE, :2] - j[head, :2].mean(0)
         yaw = math.atan2(facing[1], facing[0]) if facing.any() else 0.0
-        xy = centre + self.forward_offset_m * np.array([math.cos(yaw), math.sin(yaw)])
-        return np.array([xy[0], xy[1], yaw])
+        return np.array([centre[0], centre[1], yaw])

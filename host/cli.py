@@ -1,9 +1,129 @@
-"""The host package's ``superbody`` subcommands."""
+"""The host package's ``superbody`` subcommands: ``host run`` and ``demo``."""
 
 from __future__ import annotations
 
 import argparse
+import logging
+import math
+import signal
+import sys
+import threading
+from dataclasses import replace
+from pathlib import Path
+
+from edge import transport
+from edge.clock import WorldClock
+from edge.site import Site, SiteError, load_site
+
+__all__ = ["register", "build_estimator", "default_model"]
+
+log = logging.getLogger("superbody.host")
+
+ESTIMATORS = ("onnx", "analytic")
+_MODELS_DIR = Path(__file__).resolve().parents[1] / "models"
+
+
+def default_model(site: Site) -> Path | None:
+    """The shipped int8 model for the site (``models/<site>.int8.onnx``), if there is one."""
+    for base in (Path.cwd() / "models", _MODELS_DIR):
+        p = base / f"{site.name}.int8.onnx"
+        if p.is_file():
+            return p
+    return None
+
+
+def build_estimator(site: Site, kind: str = "onnx", model: str | Path | None = None):
+    """The estimator by name, and the name reported in PoseArrays.
+
+    Raises:
+        ValueError: unknown kind (listing the valid ones), or no model for the site.
+        host.estimator.ModelMismatchError: the model does not fit the site.
+    """
+    if kind == "analytic":
+        from host.analytic import AnalyticEstimator
+
+        return AnalyticEstimator(site), "analytic"
+    if kind != "onnx":
+        raise ValueError(f"unknown estimator {kind!r}; valid estimators: {', '.join(ESTIMATORS)}")
+    path = Path(model) if model else default_model(site)
+    if path is None:
+        raise ValueError(f"no model given and no shipped model models/{site.name}.int8.onnx; "
+                         "pass --model M.onnx or --estimator analytic")
+    if not path.is_file():
+        raise ValueError(f"--model {path}: no such file")
+    from host.estimator import OnnxEstimator
+
+    return OnnxEstimator(path, site), f"onnx:{path.name}"
+
+
+def _positive(text: str) -> float:
+    v = float(text)
+    if not (v > 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return v
+
+
+def _unit(text: str) -> float:
+    v = float(text)
+    if not 0 < v <= 1:
+        raise argparse.ArgumentTypeError(f"must be in (0, 1], got {text}")
+    return v
+
+
+def _run_host(args: argparse.Namespace) -> int:
+    from host.aggregator import Aggregator, HostConfig, run_host
+    from host.estimator import ModelMismatchError
+    from host.filter import FilterConfig
+    from host.tracker import TrackerConfig
+
+    try:
+        site = load_site(args.site)
+        estimator, name = build_estimator(site, args.estimator, args.model)
+        config = HostConfig(
+            freshness_s=args.freshness, max_publish_hz=args.max_rate, status_every_s=args.status_every,
+            tracker=replace(TrackerConfig(), d_max=args.d_max, use_geometry=not args.no_geometry),
+            filter=replace(FilterConfig(), enabled=not args.no_filter),
+        )
+        clock = WorldClock(args.clock_anchor_ns, args.clock_scale)
+        conf = transport.config_from_args(args)
+        serial = None
+        if args.serial:
+            from host.serial_link import SerialLink
+
+            serial = SerialLink(args.serial, args.baud)
+    except (SiteError, ValueError, ModelMismatchError, OSError) as e:
+        print(f"superbody host run: error: {e}", file=sys.stderr)
+        return 2
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    result = run_host(conf, Aggregator(site, estimator, name, config), clock, stop, args.duration, serial)
+    log.info("host stopped: %s", result)
+    return 0
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the host's commands (``host run``, ``demo``)."""
+    host = sub.add_parser("host", help="host aggregator commands")
+    host_sub = host.add_subparsers(dest="host_command", metavar="COMMAND", required=True)
+    p = host_sub.add_parser("run", help="run the aggregator: observations in, people's poses out")
+    p.add_argument("--site", required=True, help="site file (TOML)")
+    p.add_argument("--estimator", choices=ESTIMATORS, default="onnx", help="pose estimator (default: onnx)")
+    p.add_argument("--model", help="ONNX model (default: the shipped models/<site>.int8.onnx)")
+    p.add_argument("--freshness", type=_positive, default=0.5, help="seconds a camera's view stays in set S (default 0.5)")
+    p.add_argument("--d-max", type=_unit, default=0.65, help="colour match threshold, Bhattacharyya distance (default 0.65)")
+    p.add_argument("--no-geometry", action="store_true", help="match on colour only, as the paper (no ground-point gate)")
+    p.add_argument("--no-filter", action="store_true", help="per-frame output: no temporal filtering")
+    p.add_argument("--max-rate", type=float, default=0.0, help="publish at most this many times a second (default: after every batch)")
+    p.add_argument("--status-every", type=_positive, default=10.0, help="seconds between status lines (default 10)")
+    p.add_argument("--serial", metavar="URL", help="also write poses to this serial port (pyserial URL, e.g. /dev/ttyUSB0)")
+    p.add_argument("--baud", type=int, default=115200, help="serial baud rate (default 115200)")
+    p.add_argument("--duration", type=_positive, default=None, help="stop after this many seconds")
+    p.add_argument("--clock-scale", type=_positive, default=1.0, help="world seconds per wall second (simulation speed-up)")
+    p.add_argument("--clock-anchor-ns", type=int, default=0, help="wall time (UNIX ns) at which world and wall clocks agree")
+    transport.add_session_args(p)
+    p.set_defaults(func=_run_host)
+
+    from host import demo
+
+    demo.register(sub)

@@ -1,0 +1,300 @@
+"""The host aggregator: Observations from every camera of a site in, PoseArrays out.
+
+Two layers:
+
+- ``Aggregator``: pure and clock-injected. ``ingest()`` validates one payload and feeds the
+  tracker; ``step()`` prunes, takes each confirmed person's set S (latest fresh view per
+  camera), estimates the people whose views changed in one batched call, filters, and returns
+  the PoseArray. Bad payloads are counted by reason and dropped, never fatal.
+- ``run_host()``: the process around it: a Zenoh subscriber whose callback only queues the raw
+  payload (heavy work stays off Zenoh's thread), a loop that drains the queue and publishes
+  after each batch, camera liveliness, a periodic one-line status.
+
+``superbody host run --site SITE.toml [--model M.onnx | --estimator analytic]``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections import Counter, deque
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from edge import transport, wire
+from edge.clock import WorldClock
+from edge.observation import PersonView
+from edge.site import Site
+from host import pose as pose_msg
+from host.estimator import Estimator
+from host.filter import FilterConfig, PoseFilter
+from host.tracker import Tracker, TrackerConfig
+
+__all__ = ["HostConfig", "Aggregator", "run_host", "confidence"]
+
+log = logging.getLogger("superbody.host")
+
+_NS = 1_000_000_000
+
+
+@dataclass(frozen=True)
+class HostConfig:
+    """Host parameters.
+
+    Attributes:
+        freshness_s: a camera's latest view of a person counts in set S for this long.
+        max_future_s: observations stamped further ahead of the host's clock are rejected.
+        queue_size: observations waiting to be processed; beyond it the oldest are dropped.
+        min_publish_hz: publish at least this often even with no new data.
+        max_publish_hz: publish at most this often (0: after every batch of arrivals).
+        status_every_s: period of the one-line status log.
+        tracker: tracker parameters (the paper's by default).
+        filter: temporal filter parameters; ``filter.enabled=False`` gives per-frame output.
+    """
+
+    freshness_s: float = 0.5
+    max_future_s: float = 1.0
+    queue_size: int = 4096
+    min_publish_hz: float = 5.0
+    max_publish_hz: float = 0.0
+    status_every_s: float = 10.0
+    tracker: TrackerConfig = field(default_factory=TrackerConfig)
+    filter: FilterConfig = field(default_factory=FilterConfig)
+
+    def __post_init__(self) -> None:
+        for name, lo, hi in (("freshness_s", 0.01, 60.0), ("max_future_s", 0.0, 3600.0), ("min_publish_hz", 0.1, 1000.0),
+                             ("max_publish_hz", 0.0, 1000.0), ("status_every_s", 0.1, 3600.0)):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and lo <= v <= hi):
+                raise ValueError(f"HostConfig.{name} must be in [{lo}, {hi}], got {v!r}")
+        if not 1 <= self.queue_size <= 1_000_000:
+            raise ValueError(f"HostConfig.queue_size must be in [1, 1000000], got {self.queue_size!r}")
+
+
+def confidence(views: dict[str, PersonView]) -> float:
+    """A heuristic in [0, 1]: how much of the body was seen, and how surely.
+
+    The sum over views of the detected joints' scores, over 25 (a person seen whole by one
+    camera and half by another scores about 1). Use the covariance for uncertainty in metres.
+    """
+    total = sum(float(np.nansum(v.keypoints[:, 2])) for v in views.values())
+    return float(min(1.0, total / 25.0))
+
+
+class Aggregator:
+    """Tracks people and estimates their poses; clock injected, no threads, no I/O.
+
+    Args:
+        site: the site.
+        estimator: turns view sets into (x, y, yaw) (host.estimator).
+        estimator_name: reported in every PoseArray, e.g. ``onnx:wtf-apartment.int8.onnx``.
+        config: parameters.
+    """
+
+    def __init__(self, site: Site, estimator: Estimator, estimator_name: str, config: HostConfig = HostConfig()):
+        self.site = site
+        self.estimator = estimator
+        self.estimator_name = estimator_name
+        self.config = config
+        self.tracker = Tracker(site, config.tracker)
+        self.rejected: Counter[str] = Counter()
+        self.accepted = 0
+        self.cameras_alive: set[str] = set()
+        self._filters: dict[int, PoseFilter] = {}
+        self._last_input: dict[int, int] = {}  # track -> newest view stamp already estimated
+        self._poses: dict[int, tuple[pose_msg.PersonPose, int]] = {}  # track -> (pose, newest stamp)
+        self._cam_size = {c.id: (c.width, c.height) for c in site.cameras}
+        self._seq = 0
+
+    def ingest(self, payload: bytes, key: str | None, now_ns: int) -> bool:
+        """Validate one observation payload and feed the tracker.
+
+        Returns:
+            True if accepted; otherwise the reason is counted in ``rejected`` and it is dropped.
+        """
+        try:
+            obs = wire.decode(payload, expected_site=self.site.name)
+        except wire.DecodeError as e:
+            return self._reject(e.reason, f"{key}: {e}")
+        key_camera = transport.camera_from_key(key) if key else obs.camera
+        if key_camera != obs.camera:
+            return self._reject("key_mismatch", f"{key}: payload camera {obs.camera!r} differs from the key's")
+        size = self._cam_size.get(obs.camera)
+        if size is None:
+            return self._reject("unknown_camera", f"camera {obs.camera!r} is not in site {self.site.name!r}")
+        if size != (obs.width, obs.height):
+            return self._reject("image_size", f"camera {obs.camera}: image {obs.width}x{obs.height}, the site says {size[0]}x{size[1]}")
+        if obs.stamp_ns > now_ns + self.config.max_future_s * _NS:
+            return self._reject("future_stamp", f"camera {obs.camera}: stamp {(obs.stamp_ns - now_ns) / _NS:.1f} s ahead of the host clock")
+        late = self.tracker.stats.get("late_dropped", 0)
+        self.tracker.update(obs, now_ns)
+        if self.tracker.stats.get("late_dropped", 0) > late:
+            return self._reject("late", f"camera {obs.camera}: frame {obs.seq} older than one already processed")
+        self.accepted += 1
+        return True
+
+    def _reject(self, reason: str, detail: str) -> bool:
+        self.rejected[reason] += 1
+        # Log the first few of each reason, then every 1000th: a flood must not flood the log.
+        n = self.rejected[reason]
+        if n <= 3 or n % 1000 == 0:
+            log.warning("rejected observation (%s, %d so far): %s", reason, n, detail)
+        return False
+
+    def step(self, now_ns: int, latency_ns: int = 0) -> pose_msg.PoseArray:
+        """Prune, estimate the people with new views, filter, and build the PoseArray."""
+        for tr in self.tracker.prune(now_ns):
+            self._filters.pop(tr.id, None)
+            self._last_input.pop(tr.id, None)
+            self._poses.pop(tr.id, None)
+        sets = self.tracker.view_sets(now_ns, self.config.freshness_s)
+        newest = {tid: max(self.tracker.track(tid).views[c].stamp_ns for c in views) for tid, views in sets.items()}
+        todo = [tid for tid in sets if newest[tid] > self._last_input.get(tid, -1)]
+        if todo:
+            est = self.estimator.estimate([sets[tid] for tid in todo])  # one batched call
+            for tid, (x, y, yaw) in zip(todo, est):
+                self._last_input[tid] = newest[tid]
+                if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(yaw)):
+                    self.rejected["no_estimate"] += 1
+                    continue
+                f = self._filters.setdefault(tid, PoseFilter(self.config.filter))
+                fp = f.update(newest[tid], float(x), float(y), float(yaw))
+                self.tracker.set_position(tid, (fp.x, fp.y), newest[tid])
+                views = sets[tid]
+                self._poses[tid] = (pose_msg.PersonPose(
+                    id=tid, x=fp.x, y=fp.y, yaw=fp.yaw, vx=fp.vx, vy=fp.vy, yaw_rate=fp.yaw_rate,
+                    cov=np.asarray(fp.cov), confidence=confidence(views), cameras=tuple(sorted(views)),
+                    stamp_ns=newest[tid], views=len(views),
+                ), newest[tid])
+        people = tuple(p for tid, (p, _) in sorted(self._poses.items()) if tid in sets)
+        self._seq += 1
+        return pose_msg.PoseArray(
+            site=self.site.name, seq=self._seq, stamp_ns=now_ns, people=people, latency_ns=max(0, int(latency_ns)),
+            cameras_alive=tuple(sorted(self.cameras_alive)), estimator=self.estimator_name,
+        )
+
+
+def _percentiles(values: deque) -> tuple[float, float]:
+    if not values:
+        return math.nan, math.nan
+    a = np.fromiter(values, float)
+    return float(np.percentile(a, 50)), float(np.percentile(a, 99))
+
+
+def run_host(
+    conf,
+    aggregator: Aggregator,
+    clock: WorldClock = WorldClock(),
+    stop: threading.Event | None = None,
+    duration_s: float | None = None,
+    serial=None,
+    on_publish: Callable[[pose_msg.PoseArray], None] | None = None,
+) -> dict:
+    """Run the aggregator on Zenoh until ``stop`` is set or ``duration_s`` of wall time passes.
+
+    Args:
+        conf: Zenoh config (edge.transport.session_config).
+        aggregator: the core.
+        clock: the world clock (capture stamps are in its time).
+        stop: set it to stop.
+        duration_s: optional wall-clock limit.
+        serial: optional host.serial_link.SerialLink to mirror the poses to.
+        on_publish: optional callback with each PoseArray (tests, the demo).
+
+    Returns:
+        Final counters: published, accepted, rejected (by reason), queue_dropped, latency p50/p99 ms.
+    """
+    import zenoh
+
+    stop = stop or threading.Event()
+    site = aggregator.site
+    cfg = aggregator.config
+    pending: deque[tuple[bytes, str, int]] = deque()
+    wake = threading.Condition()
+    counters = Counter()
+    latencies: deque[float] = deque(maxlen=20_000)
+
+    def on_sample(sample) -> None:
+        # Only queue here: decoding and estimation run on the host loop, off Zenoh's thread.
+        if len(pending) >= cfg.queue_size:
+            pending.popleft()
+            counters["queue_dropped"] += 1
+        pending.append((sample.payload.to_bytes(), str(sample.key_expr), time.time_ns()))
+        with wake:
+            wake.notify()
+
+    def on_alive(sample) -> None:
+        cam = transport.camera_from_key(str(sample.key_expr))
+        if cam is None:
+            return
+        if sample.kind == zenoh.SampleKind.PUT:
+            if cam not in aggregator.cameras_alive:
+                log.info("camera %s is alive", cam)
+            aggregator.cameras_alive.add(cam)
+        else:
+            aggregator.cameras_alive.discard(cam)
+            log.warning("camera %s is gone (liveliness token dropped); it stops contributing", cam)
+
+    end = None if duration_s is None else time.monotonic() + duration_s
+    min_period = 1.0 / cfg.min_publish_hz
+    max_period = 1.0 / cfg.max_publish_hz if cfg.max_publish_hz > 0 else 0.0
+    with zenoh.open(conf) as session:
+        token = session.liveliness().declare_token(transport.host_alive_key(site.name))
+        pub = session.declare_publisher(transport.people_key(site.name), encoding=pose_msg.zenoh_encoding())
+        live = session.liveliness().declare_subscriber(transport.camera_alive_key(site.name), on_alive, history=True)
+        sub = session.declare_subscriber(transport.observation_key(site.name), on_sample)
+        log.info("host for site %s: %d cameras, estimator %s, publishing on %s", site.name, len(site.cameras),
+                 aggregator.estimator_name, transport.people_key(site.name))
+        last_pub = last_status = time.monotonic()
+        obs_since_status = 0
+        while not stop.is_set() and (end is None or time.monotonic() < end):
+            with wake:
+                if not pending:
+                    wake.wait(timeout=min(min_period, 0.05))
+            if max_period and time.monotonic() - last_pub < max_period:
+                time.sleep(max(0.0, max_period - (time.monotonic() - last_pub)))
+            newest_arrival = None
+            while pending:
+                payload, key, arrival = pending.popleft()
+                if aggregator.ingest(payload, key, clock.now_ns()):
+                    newest_arrival = arrival
+                obs_since_status += 1
+            if newest_arrival is None and time.monotonic() - last_pub < min_period:
+                continue
+            arr = aggregator.step(clock.now_ns())
+            now_wall = time.time_ns()
+            if newest_arrival is not None:
+                arr = pose_msg.PoseArray(arr.site, arr.seq, arr.stamp_ns, arr.people, now_wall - newest_arrival,
+                                         arr.cameras_alive, arr.estimator)
+                latencies.append((now_wall - newest_arrival) / 1e6)
+            try:
+                payload = pose_msg.encode(arr)
+            except ValueError as e:  # e.g. a filter glitch no subscriber would accept
+                aggregator.rejected["unpublishable"] += 1
+                log.error("pose array not published: %s", e)
+                continue
+            pub.put(payload)
+            counters["published"] += 1
+            if serial is not None:
+                serial.send(arr)
+            if on_publish is not None:
+                on_publish(arr)
+            last_pub = time.monotonic()
+            if last_pub - last_status >= cfg.status_every_s:
+                p50, p99 = _percentiles(latencies)
+                rej = ", ".join(f"{k} {v}" for k, v in sorted(aggregator.rejected.items())) or "none"
+                log.info("cameras alive %d/%d (%s) | people %d | obs/s %.0f | latency p50 %.2f ms p99 %.2f ms | rejected: %s | queue dropped %d",
+                         len(aggregator.cameras_alive), len(site.cameras), ",".join(sorted(aggregator.cameras_alive)) or "-",
+                         len(arr.people), obs_since_status / (last_pub - last_status), p50, p99, rej, counters["queue_dropped"])
+                last_status, obs_since_status = last_pub, 0
+        sub.undeclare()
+        live.undeclare()
+        pub.undeclare()
+        token.undeclare()
+    p50, p99 = _percentiles(latencies)
+    return {"published": counters["published"], "accepted": aggregator.accepted, "rejected": dict(aggregator.rejected),
+            "queue_dropped": counters["queue_dropped"], "latency_ms": {"p50": p50, "p99": p99}}

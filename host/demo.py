@@ -1,0 +1,349 @@
+"""``superbody demo``: the whole product on one machine with no hardware.
+
+Starts a Zenoh router on loopback, one simulated camera node per camera of the site (separate
+processes, sharing the world clock and seed, so they see the same simulated people) and the
+host with the shipped int8 model, then watches the people it publishes: a live table (id, x, y,
+yaw, cameras, error against the simulated truth) and, on exit, a summary.
+
+The truth: the demo builds the same simulated world from the same site and seed. For every
+observation a camera publishes it recomputes locally which simulated person each view is (the
+simulation is deterministic), so it knows when each person first appeared and which person a
+published track follows: identity switches are counted exactly.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from edge import transport, wire
+from edge.clock import WorldClock
+from edge.simulator import SimCamera, World, wrap_angle
+from edge.site import SiteError, load_site
+from host import pose as pose_msg
+
+__all__ = ["DemoConfig", "run_demo", "register"]
+
+log = logging.getLogger("superbody.demo")
+
+_ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_SITE = _ROOT / "deploy" / "sites" / "wtf-apartment.toml"
+_MATCH_GATE_M = 1.0
+
+
+@dataclass
+class DemoConfig:
+    """What the demo runs.
+
+    Attributes:
+        site: site file.
+        people: simulated people.
+        seed: simulator seed.
+        duration_s: stop after this many simulated seconds (None: until Ctrl-C).
+        clock_scale: simulated seconds per wall second.
+        port: loopback port of the demo's Zenoh router.
+        estimator: "onnx" or "analytic".
+        model: ONNX model (default: the shipped one for the site).
+        kill_camera: a camera id to kill mid-run (fault injection), or None.
+        kill_at_s: when to kill it, in simulated seconds from the start.
+        table: print the live table.
+        log_dir: where the processes' logs go (default: a temporary folder).
+    """
+
+    site: str = str(DEFAULT_SITE)
+    people: int = 3
+    seed: int = 7
+    duration_s: float | None = None
+    clock_scale: float = 1.0
+    port: int = 7447
+    estimator: str = "onnx"
+    model: str | None = None
+    kill_camera: str | None = None
+    kill_at_s: float = 0.0
+    table: bool = True
+    log_dir: str | None = None
+    extra_host_args: tuple[str, ...] = ()
+
+
+@dataclass
+class _Score:
+    """What the demo measured."""
+
+    appeared_ns: dict[int, int] = field(default_factory=dict)  # person -> first observation of them
+    confirmed_ns: dict[int, int] = field(default_factory=dict)  # person -> first pose of a track following them
+    track_of: dict[int, int] = field(default_factory=dict)  # person -> last track id
+    switches: int = 0
+    pos_err: list[float] = field(default_factory=list)
+    yaw_err: list[float] = field(default_factory=list)
+    latency_ms: list[float] = field(default_factory=list)
+    arrays: int = 0
+    tracks_seen: set[int] = field(default_factory=set)
+    cameras_alive_last: tuple[str, ...] = ()
+    camera_gone_reported: set[str] = field(default_factory=set)
+    arrays_after_kill: int = 0
+    rows: list[tuple] = field(default_factory=list)
+
+
+class _Watcher:
+    """Subscribes to observations and poses; scores the poses against the simulated truth."""
+
+    def __init__(self, site, world: World, t0_ns: int):
+        self.site = site
+        self.world = world
+        self.t0_ns = t0_ns
+        self.cams = {c.id: SimCamera(world, c.id) for c in site.cameras}
+        self.score = _Score()
+        self.lock = threading.Lock()
+        self.killed_ns: int | None = None
+
+    def on_observation(self, sample) -> None:
+        try:
+            obs = wire.decode(sample.payload.to_bytes(), expected_site=self.site.name)
+        except wire.DecodeError:
+            return
+        if obs.stamp_ns < self.t0_ns:
+            return
+        _, who = self.cams[obs.camera].observe(obs.stamp_ns)
+        with self.lock:
+            for k, view in zip(who, obs.people):
+                if k >= 0 and view.num_visible >= 6:  # enough for the tracker to start a candidate
+                    self.score.appeared_ns.setdefault(k, obs.stamp_ns)
+
+    def on_people(self, sample) -> None:
+        try:
+            arr = pose_msg.decode(sample.payload.to_bytes(), expected_site=self.site.name)
+        except pose_msg.PoseDecodeError:
+            return
+        with self.lock:
+            s = self.score
+            s.arrays += 1
+            s.latency_ms.append(arr.latency_ns / 1e6)
+            s.cameras_alive_last = arr.cameras_alive
+            if self.killed_ns is not None:
+                s.arrays_after_kill += 1
+            if not arr.people:
+                s.rows = []
+                return
+            states = self.world.states(arr.stamp_ns * 1e-9)
+            # Match each pose to the true person nearest at the pose's capture time.
+            truth = np.array([[st.x, st.y] for st in self.world.states(arr.people[0].stamp_ns * 1e-9)])
+            poses = np.array([[p.x, p.y] for p in arr.people])
+            cost = np.linalg.norm(poses[:, None] - truth[None], axis=2)
+            rows, cols = linear_sum_assignment(cost)
+            assigned = {r: c for r, c in zip(rows, cols) if cost[r, c] < _MATCH_GATE_M}
+            s.rows = []
+            for i, p in enumerate(arr.people):
+                s.tracks_seen.add(p.id)
+                k = assigned.get(i)
+                if k is None:
+                    s.rows.append((p, None, math.nan, math.nan))
+                    continue
+                st = self.world.states(p.stamp_ns * 1e-9)[k]
+                e_pos = math.hypot(p.x - st.x, p.y - st.y)
+                e_yaw = abs(float(wrap_angle(p.yaw - st.yaw)))
+                s.pos_err.append(e_pos)
+                s.yaw_err.append(e_yaw)
+                s.confirmed_ns.setdefault(k, arr.stamp_ns)
+                if k in s.track_of and s.track_of[k] != p.id:
+                    s.switches += 1
+                s.track_of[k] = p.id
+                s.rows.append((p, k, e_pos, e_yaw))
+            del states
+
+    def table(self, elapsed_s: float) -> str:
+        with self.lock:
+            s = self.score
+            lines = [f"superbody demo  t={elapsed_s:6.1f} s  cameras alive: {','.join(s.cameras_alive_last) or '-'}  "
+                     f"pose arrays: {s.arrays}",
+                     f"{'id':>4} {'x m':>7} {'y m':>7} {'yaw deg':>8} {'cameras':<10} {'person':>6} {'err cm':>7} {'err deg':>8}"]
+            for p, k, e_pos, e_yaw in s.rows:
+                lines.append(f"{p.id:>4} {p.x:7.2f} {p.y:7.2f} {math.degrees(p.yaw):8.1f} {','.join(p.cameras):<10} "
+                             f"{'-' if k is None else k:>6} {e_pos * 100:7.1f} {math.degrees(e_yaw):8.1f}")
+            if s.pos_err:
+                lines.append(f"running MAE: position {np.mean(s.pos_err) * 1000:.0f} mm, yaw {math.degrees(np.mean(s.yaw_err)):.1f} deg, "
+                             f"identity switches {s.switches}")
+            return "\n".join(lines)
+
+    def summary(self, people: int) -> dict:
+        with self.lock:
+            s = self.score
+            lat = np.array(s.latency_ms) if s.latency_ms else np.array([math.nan])
+            delays = {str(k): (s.confirmed_ns[k] - s.appeared_ns[k]) / 1e9 for k in s.confirmed_ns if k in s.appeared_ns}
+            return {
+                "people_simulated": people,
+                "people_confirmed": len(s.confirmed_ns),
+                "id_switches": s.switches,
+                "position_mae_mm": float(np.mean(s.pos_err) * 1000) if s.pos_err else None,
+                "yaw_mae_deg": float(math.degrees(np.mean(s.yaw_err))) if s.yaw_err else None,
+                "latency_ms": {"p50": float(np.nanpercentile(lat, 50)), "p99": float(np.nanpercentile(lat, 99))},
+                "poses_published": s.arrays,
+                "tracks": len(s.tracks_seen),
+                "confirm_delay_s": delays,
+                "cameras_alive_at_end": list(s.cameras_alive_last),
+                "pose_arrays_after_kill": s.arrays_after_kill,
+            }
+
+
+def _spawn(args: list[str], log_path: Path) -> subprocess.Popen:
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    out = open(log_path, "w")
+    return subprocess.Popen([sys.executable, "-m", "edge.cli", *args], stdout=out, stderr=subprocess.STDOUT, env=env,
+                            cwd=_ROOT, start_new_session=True)
+
+
+def run_demo(cfg: DemoConfig, stop: threading.Event | None = None) -> dict:
+    """Run the demo until ``stop`` or ``cfg.duration_s``; returns the summary."""
+    import zenoh
+
+    stop = stop or threading.Event()
+    site = load_site(cfg.site)
+    log_dir = Path(cfg.log_dir or tempfile.mkdtemp(prefix="superbody-demo-"))
+    log_dir.mkdir(parents=True, exist_ok=True)
+    endpoint = f"tcp/127.0.0.1:{cfg.port}"
+    # The world clock starts a little in the future so every process starts on the same grid.
+    anchor = time.time_ns()
+    clock = WorldClock(anchor, cfg.clock_scale)
+    common = ["--clock-scale", str(cfg.clock_scale), "--clock-anchor-ns", str(anchor), "--connect", endpoint]
+    procs: dict[str, subprocess.Popen] = {}
+    try:
+        procs["router"] = _spawn(["router", "--listen", endpoint], log_dir / "router.log")
+        for cam in site.camera_ids:
+            procs[f"camera-{cam}"] = _spawn(["edge", "run", "--site", cfg.site, "--camera", cam, "--source", "sim",
+                                            "--seed", str(cfg.seed), "--people", str(cfg.people), *common],
+                                           log_dir / f"camera-{cam}.log")
+        host_args = ["host", "run", "--site", cfg.site, "--estimator", cfg.estimator, *common, *cfg.extra_host_args]
+        if cfg.model:
+            host_args += ["--model", cfg.model]
+        procs["host"] = _spawn(host_args, log_dir / "host.log")
+        print(f"superbody demo: router on {endpoint}, {len(site.cameras)} cameras and the host started; logs in {log_dir}", file=sys.stderr)
+
+        watcher = _Watcher(site, World(site, cfg.people, cfg.seed), clock.now_ns())
+        conf = transport.session_config("peer", connect=[endpoint])
+        with zenoh.open(conf) as session:
+            subs = [session.declare_subscriber(transport.observation_key(site.name), watcher.on_observation),
+                    session.declare_subscriber(transport.people_key(site.name), watcher.on_people)]
+            start = clock.now_ns()
+            last_table = 0.0
+            killed = False
+            tty = sys.stdout.isatty()
+            while not stop.is_set():
+                elapsed = (clock.now_ns() - start) / 1e9
+                if cfg.duration_s is not None and elapsed >= cfg.duration_s:
+                    break
+                for name, p in procs.items():
+                    if p.poll() is not None and not (killed and name == f"camera-{cfg.kill_camera}"):
+                        raise RuntimeError(f"the {name} process exited with code {p.returncode}; see {log_dir / (name + '.log')}")
+                if cfg.kill_camera and not killed and elapsed >= cfg.kill_at_s:
+                    procs[f"camera-{cfg.kill_camera}"].kill()
+                    killed = True
+                    watcher.killed_ns = clock.now_ns()
+                    print(f"superbody demo: killed camera {cfg.kill_camera} at t={elapsed:.1f} s", file=sys.stderr)
+                if cfg.table and time.monotonic() - last_table >= 1.0:
+                    last_table = time.monotonic()
+                    text = watcher.table(elapsed)
+                    print(("\x1b[2J\x1b[H" if tty else "") + text + ("" if tty else "\n"), flush=True)
+                time.sleep(0.05)
+            for s in subs:
+                s.undeclare()
+        summary = watcher.summary(cfg.people)
+        summary["log_dir"] = str(log_dir)
+        if cfg.kill_camera:
+            summary["killed_camera"] = cfg.kill_camera
+            host_log = (log_dir / "host.log").read_text() if (log_dir / "host.log").exists() else ""
+            summary["host_reported_camera_gone"] = f"camera {cfg.kill_camera} is gone" in host_log
+        return summary
+    finally:
+        for p in procs.values():
+            if p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+        for p in procs.values():
+            try:
+                p.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+
+
+def _print_summary(s: dict) -> None:
+    print("\nsuperbody demo summary")
+    print(f"  people simulated / confirmed: {s['people_simulated']} / {s['people_confirmed']}  (tracks published: {s['tracks']})")
+    print(f"  identity switches:            {s['id_switches']}")
+    pm, ym = s["position_mae_mm"], s["yaw_mae_deg"]
+    print(f"  position MAE vs truth:        {'-' if pm is None else f'{pm:.0f} mm'}")
+    print(f"  yaw MAE vs truth:             {'-' if ym is None else f'{ym:.1f} deg'}")
+    print(f"  host latency p50 / p99:       {s['latency_ms']['p50']:.2f} / {s['latency_ms']['p99']:.2f} ms")
+    print(f"  pose arrays published:        {s['poses_published']}")
+    if s["confirm_delay_s"]:
+        print("  confirmed after appearing:    " + ", ".join(f"person {k}: {v:.1f} s" for k, v in sorted(s["confirm_delay_s"].items())))
+    print(f"  logs:                         {s['log_dir']}")
+
+
+def _run(args: argparse.Namespace) -> int:
+    cfg = DemoConfig(site=args.site, people=args.people, seed=args.seed, duration_s=args.duration, clock_scale=args.clock_scale,
+                     port=args.port, estimator=args.estimator, model=args.model, kill_camera=args.kill_camera,
+                     kill_at_s=args.kill_at, table=not args.no_table)
+    try:
+        site = load_site(cfg.site)
+        if cfg.kill_camera is not None:
+            site.camera(cfg.kill_camera)
+    except (SiteError, KeyError) as e:
+        print(f"superbody demo: error: {e.args[0] if e.args else e}", file=sys.stderr)
+        return 2
+    stop = threading.Event()
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        summary = run_demo(cfg, stop)
+    except RuntimeError as e:
+        print(f"superbody demo: error: {e}", file=sys.stderr)
+        return 1
+    _print_summary(summary)
+    if args.json_summary:
+        keys = ("people_simulated", "people_confirmed", "id_switches", "position_mae_mm", "yaw_mae_deg", "latency_ms", "poses_published")
+        Path(args.json_summary).write_text(json.dumps({k: summary[k] for k in keys}, indent=1) + "\n")
+    return 0
+
+
+def _people(text: str) -> int:
+    n = int(text)
+    if not 1 <= n <= 10:
+        raise argparse.ArgumentTypeError(f"--people must be in [1, 10], got {n}")
+    return n
+
+
+def _positive(text: str) -> float:
+    v = float(text)
+    if not (v > 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return v
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("demo", help="run the whole system on simulated cameras and people, with a live table")
+    p.add_argument("--site", default=str(DEFAULT_SITE), help="site file (default: the paper's apartment)")
+    p.add_argument("--people", type=_people, default=3, help="simulated people (default 3)")
+    p.add_argument("--seed", type=int, default=7, help="simulator seed (default 7)")
+    p.add_argument("--duration", type=_positive, default=None, help="stop after this many simulated seconds (default: Ctrl-C)")
+    p.add_argument("--clock-scale", type=_positive, default=1.0, help="simulated seconds per wall second (default 1)")
+    p.add_argument("--port", type=int, default=7447, help="loopback port of the demo's Zenoh router (default 7447)")
+    p.add_argument("--estimator", choices=("onnx", "analytic"), default="onnx", help="pose estimator (default: the shipped int8 model)")
+    p.add_argument("--model", help="ONNX model (default: models/<site>.int8.onnx)")
+    p.add_argument("--kill-camera", metavar="ID", help="kill this camera's process mid-run (fault injection)")
+    p.add_argument("--kill-at", type=_positive, default=10.0, help="simulated second at which to kill it (default 10)")
+    p.add_argument("--no-table", action="store_true", help="no live table, only the summary")
+    p.add_argument("--json-summary", metavar="F", help="write the summary as JSON")
+    p.set_defaults(func=_run)
