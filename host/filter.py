@@ -1,0 +1,288 @@
+"""The temporal filter: a constant-velocity Kalman filter on each person's (x, y, yaw).
+
+The maths is two pure functions in textbook notation (``predict``, ``update``), written so that
+``x`` may be a vector (n,) or a matrix (n, k) of k independent columns that share one
+covariance. ``PoseFilter`` holds one person's state and uses them.
+
+State: (x, y, yaw, vx, vy, yaw_rate); yaw is kept wrapped to (-pi, pi] and each yaw measurement
+is unwrapped next to the state first, so a person turning through +-pi gives a small innovation.
+Process noise: piecewise-constant white acceleration (Bar-Shalom), per axis
+
+    Q = sigma_a^2 [[dt^4/4, dt^3/2], [dt^3/2, dt^2]]
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["predict", "update", "wrap_angle", "white_accel_noise", "FilterConfig", "FilteredPose", "PoseFilter"]
+
+_NS = 1e-9
+
+
+def _T(a: NDArray) -> NDArray:
+    """Transpose of the last two axes (a batch of matrices stays a batch)."""
+    return np.swapaxes(a, -1, -2)
+
+
+def predict(x: NDArray, P: NDArray, F: NDArray, Q: NDArray) -> tuple[NDArray, NDArray]:
+    """Kalman prediction.
+
+    Leading batch dimensions (B, ...) broadcast: a batch of filters runs in one call.
+
+    Args:
+        x: state, (n,) or (n, k), or batched (B, n, k).
+        P: covariance, (n, n) or (B, n, n).
+        F: state transition, (n, n) or (B, n, n).
+        Q: process noise, (n, n) or (B, n, n).
+
+    Returns:
+        ``(x, P)`` predicted.
+    """
+    # x = F x
+    x = F @ x
+    # P = F P F^T + Q
+    P = F @ P @ _T(F) + Q
+    return x, P
+
+
+def update(x: NDArray, P: NDArray, z: NDArray, H: NDArray, R: NDArray) -> tuple[NDArray, NDArray]:
+    """Kalman measurement update (Joseph form, which keeps P symmetric positive definite).
+
+    Leading batch dimensions (B, ...) broadcast, as in ``predict``.
+
+    Args:
+        x: state, (n,) or (n, k), or batched (B, n, k).
+        P: covariance, (n, n) or (B, n, n).
+        z: measurement, (m,) or (m, k), or batched (B, m, k).
+        H: measurement matrix, (m, n) or (B, m, n).
+        R: measurement noise, (m, m) or (B, m, m).
+
+    Returns:
+        ``(x, P)`` updated.
+    """
+    # y = z - H x
+    y = z - H @ x
+    # S = H P H^T + R
+    S = H @ P @ _T(H) + R
+    # K = P H^T S^-1   (solved as K^T = S^-T (P H^T)^T)
+    K = _T(np.linalg.solve(_T(S), _T(P @ _T(H))))
+    # x = x + K y
+    x = x + K @ y
+    # P = (I - K H) P (I - K H)^T + K R K^T
+    I_KH = np.eye(P.shape[-1]) - K @ H
+    P = I_KH @ P @ _T(I_KH) + K @ R @ _T(K)
+    return x, P
+
+
+def wrap_angle(a: float | NDArray) -> float | NDArray:
+    """Wrap angles to (-pi, pi]."""
+    return math.pi - (math.pi - a) % (2 * math.pi)
+
+
+def white_accel_noise(dt: float | NDArray, sigma_a: float) -> NDArray[np.float64]:
+    """Process noise of one (position, velocity) axis over ``dt`` seconds.
+
+    Returns:
+        (2, 2), or (B, 2, 2) for ``dt`` of shape (B,).
+    """
+    dt = np.asarray(dt, dtype=np.float64)
+    g = np.stack([0.5 * dt * dt, dt], axis=-1)  # (..., 2)
+    # Q = sigma_a^2 g g^T = sigma_a^2 [[dt^4/4, dt^3/2], [dt^3/2, dt^2]]
+    return sigma_a * sigma_a * g[..., :, None] * g[..., None, :]
+
+
+def _check(name: str, value: float, lo: float, hi: float, lo_open: bool = True) -> None:
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if not (ok and (lo < value if lo_open else lo <= value) and value <= hi):
+        raise ValueError(f"FilterConfig.{name} must be in {'(' if lo_open else '['}{lo}, {hi}], got {value!r}")
+
+
+@dataclass(frozen=True)
+class FilterConfig:
+    """Noise model of a walking person and the filter's switches.
+
+    Attributes:
+        enabled: False passes measurements through (per-frame output, finite-difference rates).
+        meas_std_xy_m: default 1-sigma of a position measurement, metres.
+        meas_std_yaw_rad: default 1-sigma of a yaw measurement, radians.
+        accel_std_mps2: 1-sigma of a person's acceleration (starting, stopping), m/s^2.
+        yaw_accel_std_radps2: 1-sigma of torso angular acceleration, rad/s^2.
+        init_speed_std_mps: 1-sigma of the unknown speed at the first measurement, m/s.
+        init_yaw_rate_std_radps: 1-sigma of the unknown yaw rate at the first measurement.
+        reset_after_s: a gap longer than this between measurements restarts the filter.
+    """
+
+    enabled: bool = True
+    meas_std_xy_m: float = 0.1
+    meas_std_yaw_rad: float = math.radians(10.0)
+    accel_std_mps2: float = 1.5
+    yaw_accel_std_radps2: float = 5.0
+    init_speed_std_mps: float = 1.0
+    init_yaw_rate_std_radps: float = 2.0
+    reset_after_s: float = 2.0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.enabled, bool):
+            raise ValueError(f"FilterConfig.enabled must be true or false, got {self.enabled!r}")
+        _check("meas_std_xy_m", self.meas_std_xy_m, 0.0, 10.0)
+        _check("meas_std_yaw_rad", self.meas_std_yaw_rad, 0.0, math.pi)
+        _check("accel_std_mps2", self.accel_std_mps2, 0.0, 100.0)
+        _check("yaw_accel_std_radps2", self.yaw_accel_std_radps2, 0.0, 1000.0)
+        _check("init_speed_std_mps", self.init_speed_std_mps, 0.0, 100.0)
+        _check("init_yaw_rate_std_radps", self.init_yaw_rate_std_radps, 0.0, 100.0)
+        _check("reset_after_s", self.reset_after_s, 0.0, 3600.0)
+
+
+@dataclass(frozen=True, eq=False)
+class FilteredPose:
+    """One person's filtered pose at one time.
+
+    Attributes:
+        stamp_ns: the time it holds for, UNIX nanoseconds.
+        x, y: floor position, metres (REP-103).
+        yaw: torso yaw, radians in (-pi, pi].
+        vx, vy: velocity, m/s.
+        yaw_rate: rad/s, counter-clockwise positive.
+        cov: (3, 3) covariance of (x, y, yaw).
+    """
+
+    stamp_ns: int
+    x: float
+    y: float
+    yaw: float
+    vx: float
+    vy: float
+    yaw_rate: float
+    cov: NDArray[np.float64]
+
+
+# State layout: (x, y, yaw, vx, vy, yaw_rate); position i's velocity is at i + 3.
+_H = np.hstack([np.eye(3), np.zeros((3, 3))])  # (3, 6) measures the pose, not its rates
+
+
+class PoseFilter:
+    """Constant-velocity Kalman filter on one person's (x, y, yaw), fed with time stamps.
+
+    Measurements older than the state are ignored (counted in ``ignored``); a gap longer than
+    ``config.reset_after_s`` restarts the filter from the new measurement.
+    """
+
+    def __init__(self, config: FilterConfig | None = None) -> None:
+        self.config = config or FilterConfig()
+        self.ignored = 0
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the state; the next measurement starts afresh."""
+        self._t: int | None = None
+        self._x = np.zeros(6)  # (6,) state
+        self._P = np.eye(6)  # (6, 6) covariance
+
+    @property
+    def stamp_ns(self) -> int | None:
+        """Time of the state, or None before the first measurement."""
+        return self._t
+
+    def update(self, t_ns: int, x: float, y: float, yaw: float, meas_std: tuple[float, float, float] | None = None) -> FilteredPose:
+        """Add one measurement and return the filtered pose at ``t_ns``.
+
+        Args:
+            t_ns: capture time, UNIX nanoseconds.
+            x, y: measured floor position, metres.
+            yaw: measured torso yaw, radians (any range; it is wrapped).
+            meas_std: (std_x m, std_y m, std_yaw rad) of this measurement; the config's by default.
+
+        Raises:
+            ValueError: a non-finite input or a non-positive std.
+        """
+        for name, v in (("x", x), ("y", y), ("yaw", yaw)):
+            if not math.isfinite(v):
+                raise ValueError(f"PoseFilter.update: {name} must be finite, got {v!r}")
+        if meas_std is None:
+            c = self.config
+            std = (c.meas_std_xy_m, c.meas_std_xy_m, c.meas_std_yaw_rad)
+        else:
+            std = tuple(float(s) for s in meas_std)
+            if len(std) != 3 or not all(math.isfinite(s) and s > 0 for s in std):
+                raise ValueError(f"PoseFilter.update: meas_std must be 3 finite positive stds (x m, y m, yaw rad), got {meas_std!r}")
+        t_ns = int(t_ns)
+        yaw = float(wrap_angle(float(yaw)))
+        R = np.diag(np.square(std))  # (3, 3)
+        if self._t is not None and t_ns < self._t:
+            self.ignored += 1
+            return self._pose(self._t, self._x, self._P)
+        if self._t is None or (t_ns - self._t) * _NS > self.config.reset_after_s:
+            return self._start(t_ns, x, y, yaw, R)
+        if not self.config.enabled:
+            return self._pass_through(t_ns, x, y, yaw, R)
+        xs, P = self._predicted(t_ns)
+        # Unwrap the yaw measurement next to the predicted yaw: the innovation stays in (-pi, pi].
+        z = np.array([x, y, xs[2] + wrap_angle(yaw - xs[2])])
+        xs, P = update(xs, P, z, _H, R)
+        xs[2] = wrap_angle(xs[2])
+        self._t, self._x, self._P = t_ns, xs, P
+        return self._pose(t_ns, xs, P)
+
+    def predict_to(self, t_ns: int) -> FilteredPose:
+        """The pose predicted at ``t_ns`` (the state's own time if ``t_ns`` is earlier).
+
+        With the filter disabled this is the last measurement, held.
+
+        Raises:
+            RuntimeError: no measurement yet.
+        """
+        if self._t is None:
+            raise RuntimeError("PoseFilter.predict_to: no measurement yet")
+        t_ns = max(int(t_ns), self._t)
+        if not self.config.enabled:
+            return self._pose(t_ns, self._x, self._P)
+        xs, P = self._predicted(t_ns)
+        return self._pose(t_ns, xs, P)
+
+    def _predicted(self, t_ns: int) -> tuple[NDArray, NDArray]:
+        dt = (t_ns - self._t) * _NS
+        F = np.eye(6)
+        F[:3, 3:] = dt * np.eye(3)
+        c = self.config
+        Q = np.zeros((6, 6))
+        for i, sigma in ((0, c.accel_std_mps2), (1, c.accel_std_mps2), (2, c.yaw_accel_std_radps2)):
+            Q[np.ix_((i, i + 3), (i, i + 3))] = white_accel_noise(dt, sigma)
+        xs, P = predict(self._x, self._P, F, Q)
+        xs[2] = wrap_angle(xs[2])
+        return xs, P
+
+    def _start(self, t_ns: int, x: float, y: float, yaw: float, R: NDArray) -> FilteredPose:
+        c = self.config
+        self._t = t_ns
+        self._x = np.array([x, y, yaw, 0.0, 0.0, 0.0])
+        self._P = np.zeros((6, 6))
+        self._P[:3, :3] = R
+        self._P[3:, 3:] = np.diag([c.init_speed_std_mps**2, c.init_speed_std_mps**2, c.init_yaw_rate_std_radps**2])
+        if not c.enabled:
+            self._P[3:, 3:] = 0.0
+        return self._pose(t_ns, self._x, self._P)
+
+    def _pass_through(self, t_ns: int, x: float, y: float, yaw: float, R: NDArray) -> FilteredPose:
+        dt = (t_ns - self._t) * _NS
+        old = self._x
+        rates = old[3:]  # a repeated stamp keeps the previous rates
+        if dt > 0:
+            # Finite differences; the yaw difference wrapped, so 170 -> -170 deg is +20 deg.
+            rates = np.array([(x - old[0]) / dt, (y - old[1]) / dt, wrap_angle(yaw - old[2]) / dt])
+        self._t = t_ns
+        self._x = np.concatenate([[x, y, yaw], rates])
+        self._P = np.zeros((6, 6))
+        self._P[:3, :3] = R
+        return self._pose(t_ns, self._x, self._P)
+
+    @staticmethod
+    def _pose(t_ns: int, xs: NDArray, P: NDArray) -> FilteredPose:
+        return FilteredPose(
+            stamp_ns=t_ns, x=float(xs[0]), y=float(xs[1]), yaw=float(xs[2]),
+            vx=float(xs[3]), vy=float(xs[4]), yaw_rate=float(xs[5]), cov=P[:3, :3].copy(),
+        )

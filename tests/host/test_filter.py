@@ -1,0 +1,171 @@
+"""The temporal filter: pure Kalman steps and the per-person pose filter."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from host.filter import FilterConfig, PoseFilter, predict, update, wrap_angle
+
+S = 1_000_000_000  # ns per second
+DEG = math.pi / 180
+
+
+@pytest.mark.parametrize(
+    ("a", "wrapped"),
+    [
+        (0.0, 0.0),                      # identity
+        (math.pi, math.pi),              # +pi stays
+        (-math.pi, math.pi),             # -pi becomes +pi: the interval is (-pi, pi]
+        (3 * math.pi / 2, -math.pi / 2),  # one turn down
+        (-7 * math.pi / 2, math.pi / 2),  # two turns up
+    ],
+)
+def test_wrap_angle(a, wrapped):
+    assert wrap_angle(a) == pytest.approx(wrapped)
+
+
+def test_predict_and_update_match_the_textbook_on_a_scalar():
+    x, P = predict(np.array([1.0]), np.array([[2.0]]), np.array([[1.0]]), np.array([[0.5]]))
+    assert x[0] == 1.0 and P[0, 0] == 2.5
+    # Equal prior and measurement variances: halfway, half the variance.
+    x, P = update(np.array([0.0]), np.array([[1.0]]), np.array([2.0]), np.array([[1.0]]), np.array([[1.0]]))
+    assert x[0] == pytest.approx(1.0) and P[0, 0] == pytest.approx(0.5)
+
+
+def test_update_handles_columns_sharing_a_covariance():
+    # Two independent axes as the columns of x: same result as two separate updates.
+    x = np.array([[0.0, 10.0], [1.0, -1.0]])  # (2, 2): rows (pos, vel), columns (x, y)
+    P = np.array([[1.0, 0.2], [0.2, 0.5]])
+    H, R = np.array([[1.0, 0.0]]), np.array([[0.3]])
+    both, _ = update(x, P, np.array([[0.5, 9.0]]), H, R)
+    for col, z in ((0, 0.5), (1, 9.0)):
+        one, _ = update(x[:, col], P, np.array([z]), H, R)
+        assert np.allclose(both[:, col], one)
+
+
+def test_yaw_wraps_across_pi():
+    f = PoseFilter()
+    f.update(0, 0.0, 0.0, 170 * DEG)
+    out = f.update(S // 10, 0.0, 0.0, -170 * DEG)
+    # The innovation is +20 deg, not -340: the filter turns counter-clockwise through pi.
+    assert out.yaw_rate > 0
+    assert abs(wrap_angle(out.yaw - 170 * DEG)) < 20 * DEG
+    assert -math.pi < out.yaw <= math.pi
+
+
+def test_yaw_keeps_turning_through_pi():
+    f = PoseFilter()
+    for k in range(60):  # 4 s at 15 Hz turning at +1 rad/s, starting at 3 rad
+        out = f.update(k * S // 15, 0.0, 0.0, float(wrap_angle(3.0 + k / 15)))
+    assert out.yaw_rate == pytest.approx(1.0, abs=0.05)
+    assert abs(wrap_angle(out.yaw - (3.0 + 59 / 15))) < 2 * DEG
+
+
+@pytest.mark.parametrize(
+    ("vx", "vy", "w"),
+    [
+        (0.0, 0.0, 0.0),    # standing still
+        (1.2, -0.5, 0.0),   # walking diagonally
+        (0.0, 1.0, -0.8),   # walking while turning clockwise
+    ],
+)
+def test_converges_to_constant_velocity(vx, vy, w):
+    rng = np.random.default_rng(0)
+    f = PoseFilter()
+    for k in range(75):  # 5 s at 15 Hz, noisy measurements
+        t = k / 15
+        out = f.update(round(t * S), 1 + vx * t + rng.normal(0, 0.05), -2 + vy * t + rng.normal(0, 0.05),
+                       float(wrap_angle(0.5 + w * t + rng.normal(0, 3 * DEG))))
+    assert (out.vx, out.vy) == pytest.approx((vx, vy), abs=0.15)
+    assert out.yaw_rate == pytest.approx(w, abs=0.25)
+    assert (out.x, out.y) == pytest.approx((1 + vx * t, -2 + vy * t), abs=0.1)
+    assert out.cov.shape == (3, 3) and np.all(np.linalg.eigvalsh(out.cov) > 0)
+    # Filtered position is tighter than one measurement.
+    assert out.cov[0, 0] < 0.1**2
+
+
+def test_predict_to_extrapolates():
+    f = PoseFilter()
+    for k in range(30):
+        f.update(k * S // 10, 0.5 * k / 10, 0.0, 0.0)
+    ahead = f.predict_to(29 * S // 10 + S)
+    assert ahead.x == pytest.approx(0.5 * 2.9 + 0.5, abs=0.05)
+    assert ahead.cov[0, 0] > f.predict_to(0).cov[0, 0]  # uncertainty grows; earlier times give the state
+
+
+def test_predict_to_needs_a_measurement():
+    with pytest.raises(RuntimeError):
+        PoseFilter().predict_to(0)
+
+
+def test_disabled_passes_measurements_through_with_finite_difference_rates():
+    f = PoseFilter(FilterConfig(enabled=False))
+    first = f.update(0, 1.0, 2.0, 170 * DEG)
+    assert (first.x, first.y, first.vx, first.vy, first.yaw_rate) == (1.0, 2.0, 0.0, 0.0, 0.0)
+    out = f.update(S // 2, 1.5, 1.0, -170 * DEG)
+    assert (out.x, out.y) == (1.5, 1.0) and out.yaw == pytest.approx(-170 * DEG)
+    assert (out.vx, out.vy) == pytest.approx((1.0, -2.0))
+    assert out.yaw_rate == pytest.approx(40 * DEG)  # +20 deg in 0.5 s, across pi
+    assert np.allclose(out.cov, np.diag([0.1**2, 0.1**2, (10 * DEG) ** 2]))
+    assert f.predict_to(S).x == 1.5  # held, not extrapolated
+
+
+def test_out_of_order_measurement_is_ignored():
+    f = PoseFilter()
+    f.update(S, 0.0, 0.0, 0.0)
+    before = f.update(2 * S, 1.0, 0.0, 0.0)
+    after = f.update(S + S // 2, 50.0, 50.0, 3.0)
+    assert f.ignored == 1
+    assert (after.stamp_ns, after.x, after.y) == (before.stamp_ns, before.x, before.y)
+
+
+def test_long_gap_restarts():
+    f = PoseFilter(FilterConfig(reset_after_s=1.0))
+    f.update(0, 0.0, 0.0, 0.0)
+    f.update(S // 10, 0.1, 0.0, 0.0)
+    out = f.update(5 * S, 7.0, 7.0, 1.0)
+    assert (out.x, out.y, out.yaw, out.vx) == (7.0, 7.0, 1.0, 0.0)
+
+
+@pytest.mark.parametrize(
+    ("args", "kwargs"),
+    [
+        ((0, math.nan, 0.0, 0.0), {}),                        # NaN x
+        ((0, 0.0, math.inf, 0.0), {}),                        # infinite y
+        ((0, 0.0, 0.0, math.nan), {}),                        # NaN yaw
+        ((0, 0.0, 0.0, 0.0), {"meas_std": (0.1, 0.1)}),       # too few stds
+        ((0, 0.0, 0.0, 0.0), {"meas_std": (0.1, 0.0, 0.1)}),  # zero std
+        ((0, 0.0, 0.0, 0.0), {"meas_std": (0.1, 0.1, math.nan)}),  # NaN std
+    ],
+)
+def test_rejects_bad_measurements(args, kwargs):
+    with pytest.raises(ValueError):
+        PoseFilter().update(*args, **kwargs)
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("meas_std_xy_m", 0.0),          # must be positive
+        ("meas_std_yaw_rad", 4.0),       # above pi
+        ("accel_std_mps2", math.nan),    # not finite
+        ("reset_after_s", -1.0),         # negative
+        ("enabled", 1),                  # not a bool
+        ("accel_std_mps2", "fast"),      # not a number
+    ],
+)
+def test_config_is_validated(field, value):
+    with pytest.raises(ValueError, match=field):
+        FilterConfig(**{field: value})
+
+
+def test_measurement_std_weights_the_update():
+    sure, unsure = PoseFilter(), PoseFilter()
+    for f in (sure, unsure):
+        f.update(0, 0.0, 0.0, 0.0)
+    a = sure.update(S // 10, 1.0, 0.0, 0.0, meas_std=(0.01, 0.01, 0.01))
+    b = unsure.update(S // 10, 1.0, 0.0, 0.0, meas_std=(1.0, 1.0, 1.0))
+    assert a.x > 0.9 and b.x < a.x
