@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from edge import body
+from edge.angles import wrap_angle
 from edge.camera import Camera, project, world_to_camera
 from edge.colour import hs_histogram
 from edge.observation import Observation, PersonView
@@ -46,7 +47,6 @@ __all__ = [
     "skeleton",
     "render_views",
     "SimCamera",
-    "wrap_angle",
 ]
 
 # Lateral (left-positive), forward and height offsets of each joint for a 1.75 m person
@@ -58,13 +58,6 @@ _LEFT: Final = np.array([i for i, n in enumerate(body.KEYPOINTS) if n.startswith
 _RIGHT: Final = np.array([body.MIRROR[i] for i in _LEFT])
 _FACE: Final = np.array([0, 1, 2])
 _PERSON_RADIUS_M: Final = 0.2
-
-
-def wrap_angle(a: NDArray | float) -> NDArray | float:
-    """Wrap angles to (-pi, pi]."""
-    w = np.mod(np.asarray(a) + np.pi, 2 * np.pi) - np.pi
-    w = np.where(w == -np.pi, np.pi, w)
-    return float(w) if np.ndim(w) == 0 else w
 
 
 @dataclass(frozen=True)

@@ -33,7 +33,8 @@ from scipy.optimize import linear_sum_assignment
 
 from edge import transport, wire
 from edge.clock import WorldClock
-from edge.simulator import SimCamera, World, wrap_angle
+from edge.angles import wrap_angle
+from edge.simulator import SimCamera, World
 from edge.site import SiteError, load_site
 from host import pose as pose_msg
 

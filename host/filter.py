@@ -19,7 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["predict", "update", "wrap_angle", "white_accel_noise", "FilterConfig", "FilteredPose", "PoseFilter"]
+from edge.angles import wrap_angle
+
+__all__ = ["predict", "update", "white_accel_noise", "FilterConfig", "FilteredPose", "PoseFilter"]
 
 _NS = 1e-9
 
@@ -77,11 +79,6 @@ def update(x: NDArray, P: NDArray, z: NDArray, H: NDArray, R: NDArray) -> tuple[
     I_KH = np.eye(P.shape[-1]) - K @ H
     P = I_KH @ P @ _T(I_KH) + K @ R @ _T(K)
     return x, P
-
-
-def wrap_angle(a: float | NDArray) -> float | NDArray:
-    """Wrap angles to (-pi, pi]."""
-    return math.pi - (math.pi - a) % (2 * math.pi)
 
 
 def white_accel_noise(dt: float | NDArray, sigma_a: float) -> NDArray[np.float64]:

@@ -43,6 +43,7 @@ from typing import Any, Final, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from edge.angles import wrap_angle
 from edge.body import INDEX, KEYPOINTS, NUM_KEYPOINTS
 from edge.camera import Camera, world_to_camera
 from edge.observation import PersonView, empty_histogram
@@ -130,11 +131,6 @@ class RawSample:
 # --- frames -------------------------------------------------------------------------------------
 
 
-def _wrap(a: NDArray | float) -> NDArray[np.float64]:
-    """Angles wrapped to (-pi, pi]."""
-    return np.pi - np.mod(np.pi - np.asarray(a, dtype=np.float64), 2 * np.pi)
-
-
 def wtf_to_world(X: ArrayLike, Y: ArrayLike, Z: ArrayLike) -> tuple[NDArray[np.float64], ...]:
     """Dataset world (mm, Y up, left-handed) to REP-103 (metres, z up, right-handed).
 
@@ -163,13 +159,13 @@ def from_dataset_frame(x_mm: ArrayLike, z_mm: ArrayLike, angle: ArrayLike) -> tu
     """
     x_mm, z_mm, angle = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (x_mm, z_mm, angle)))
     # angle 0 faces dataset +Z = REP-103 +y (yaw pi/2); both turn the same way on the REP-103 floor.
-    return x_mm / 1000.0, z_mm / 1000.0, _wrap(angle + np.pi / 2)
+    return x_mm / 1000.0, z_mm / 1000.0, wrap_angle(angle + np.pi / 2)
 
 
 def to_dataset_frame(x: ArrayLike, y: ArrayLike, yaw: ArrayLike) -> tuple[NDArray[np.float64], ...]:
     """A REP-103 floor pose to the dataset's ``(x_mm, z_mm, angle)``, angle in (-pi, pi]."""
     x, y, yaw = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (x, y, yaw)))
-    return x * 1000.0, y * 1000.0, _wrap(yaw - np.pi / 2)
+    return x * 1000.0, y * 1000.0, wrap_angle(yaw - np.pi / 2)
 
 
 # --- validation ---------------------------------------------------------------------------------

@@ -8,7 +8,8 @@ import pytest
 
 from edge import body
 from edge.colour import bhattacharyya_matrix
-from edge.simulator import NoiseModel, SimCamera, World, render_views, skeleton, wrap_angle
+from edge.angles import wrap_angle
+from edge.simulator import NoiseModel, SimCamera, World, render_views, skeleton
 from edge.site import load_site
 
 from tests.conftest import LAB_SITE

@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from edge.simulator import NoiseModel, PersonState, World, render_views, skeleton, wrap_angle
+from edge.angles import wrap_angle
+from edge.simulator import NoiseModel, PersonState, World, render_views, skeleton
 from edge.site import load_site
 from host.analytic import AnalyticEstimator, joints_3d, triangulate
 from models.wtf import load_wtf

@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from host.filter import FilterConfig, PoseFilter, predict, update, wrap_angle
+from edge.angles import wrap_angle
+from host.filter import FilterConfig, PoseFilter, predict, update
 
 S = 1_000_000_000  # ns per second
 DEG = math.pi / 180

@@ -13,6 +13,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from edge.angles import wrap_angle
 from edge.body import LEFT_HIP, LEFT_SHOULDER, NOSE, NUM_KEYPOINTS, RIGHT_HIP, RIGHT_SHOULDER
 from edge.colour import HIST_BINS
 from edge.site import load_site
@@ -40,10 +41,6 @@ def raw() -> list[RawSample]:
     if not DEV_JSON.is_file():
         pytest.fail(f"dev.json not found at {DEV_JSON.resolve()}: the shared datasets folder must sit beside the repo")
     return load_wtf_raw(DEV_JSON)
-
-
-def _wrap(a):
-    return np.pi - np.mod(np.pi - np.asarray(a, dtype=np.float64), 2 * np.pi)
 
 
 def _forward(left: np.ndarray, right: np.ndarray) -> np.ndarray:
@@ -74,7 +71,7 @@ CANDIDATES = [(sign, k) for sign in (1, -1) for k in range(4)]
 
 
 def _median_residual_deg(reference: np.ndarray, angle: np.ndarray, sign: int, k: int) -> float:
-    return float(np.degrees(np.median(np.abs(_wrap(reference - (sign * angle + k * np.pi / 2))))))
+    return float(np.degrees(np.median(np.abs(wrap_angle(reference - (sign * angle + k * np.pi / 2))))))
 
 
 # --- conventions measured on dev.json -----------------------------------------------------------
@@ -118,7 +115,7 @@ def test_yaw_convention_matches_the_3d_joints(raw):
     assert residual[chosen] < 20.0, residual
     assert all(residual[chosen] + 10.0 < r for c, r in residual.items() if c != chosen), residual
     # from_dataset_frame really is that mapping.
-    assert np.allclose(_wrap(from_dataset_frame(0.0, 0.0, angle)[2] - (angle + np.pi / 2)), 0.0)
+    assert np.allclose(wrap_angle(from_dataset_frame(0.0, 0.0, angle)[2] - (angle + np.pi / 2)), 0.0)
 
 
 def test_yaw_convention_matches_the_walking_direction(raw):
@@ -144,7 +141,7 @@ def test_original_estimate_uses_the_same_convention(raw):
             J = v.joints
             if v.estimate is not None and not np.isnan(J[[LEFT_SHOULDER, RIGHT_SHOULDER], 0]).any():
                 f = _forward(J[LEFT_SHOULDER], J[RIGHT_SHOULDER])
-                diffs.append(_wrap(math.atan2(f[1], f[0]) - v.estimate[2]))
+                diffs.append(wrap_angle(math.atan2(f[1], f[0]) - v.estimate[2]))
     assert len(diffs) > 400
     assert np.degrees(np.abs(diffs)).max() < 1e-3
 
@@ -350,9 +347,9 @@ def test_valid_doc_parses_and_ignores_unknown_keys():
 def test_dataset_frame_table(dataset, rep103):
     got = from_dataset_frame(*dataset)
     assert np.allclose(got[:2], rep103[:2])
-    assert abs(_wrap(got[2] - rep103[2])) < 1e-12 and -np.pi < got[2] <= np.pi
+    assert abs(wrap_angle(got[2] - rep103[2])) < 1e-12 and -np.pi < got[2] <= np.pi
     back = to_dataset_frame(*rep103)
-    assert np.allclose(back[:2], dataset[:2]) and abs(_wrap(back[2] - dataset[2])) < 1e-12
+    assert np.allclose(back[:2], dataset[:2]) and abs(wrap_angle(back[2] - dataset[2])) < 1e-12
 
 
 def test_yaw_pi_stays_pi():
@@ -367,7 +364,7 @@ finite = st.floats(-1e4, 1e4, allow_nan=False)
 def test_dataset_frame_round_trip(x, y, yaw):
     x2, y2, yaw2 = from_dataset_frame(*to_dataset_frame(x, y, yaw))
     assert x2 == pytest.approx(x, abs=1e-9) and y2 == pytest.approx(y, abs=1e-9)
-    assert abs(_wrap(yaw2 - yaw)) < 1e-9 and -np.pi < yaw2 <= np.pi
+    assert abs(wrap_angle(yaw2 - yaw)) < 1e-9 and -np.pi < yaw2 <= np.pi
 
 
 def test_frame_helpers_are_vectorised_inverses():
