@@ -13,15 +13,15 @@ The schema, for subscribers in any language, is in ``docs/observation-schema.md`
 0.1 mm, so a full person is about 2 KB. ``decode`` checks every field and raises ``DecodeError``
 naming the field (``people[2].keypoints[5][1]``), a ``reason`` from ``REASONS`` for reject
 counters, and the allowed range. Numeric arrays are checked with numpy; the error still names
-the first offending element.
+the first offending element. The checks every superbody codec shares, and ``DecodeError``
+itself, are in ``edge/payload.py``.
 """
 
 from __future__ import annotations
 
 import json
-import numbers
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, Final, Literal, NoReturn, get_args
+from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,7 +29,23 @@ from numpy.typing import NDArray
 from edge.body import NUM_KEYPOINTS
 from edge.colour import HIST_BINS
 from edge.observation import Observation, PersonView
-from edge.site import NAME_RE
+from edge.payload import (
+    MAX_INT63,
+    REASONS,
+    DecodeError,
+    Reason,
+    as_int,
+    brief,
+    check_array,
+    check_array_max,
+    check_int,
+    check_int_pair,
+    check_message,
+    check_name,
+    check_object,
+    fail,
+    parse_json,
+)
 
 if TYPE_CHECKING:
     import zenoh
@@ -46,7 +62,6 @@ __all__ = [
     "encode",
     "decode",
     "zenoh_encoding",
-    
 ]
 
 SCHEMA: Final[str] = "superbody.observation"
@@ -57,30 +72,11 @@ ENCODING: Final[str] = f"application/json;{SCHEMA}/{VERSION}"
 MAX_PAYLOAD_BYTES: Final[int] = 256 * 1024
 MAX_PEOPLE: Final[int] = 64
 
-Reason = Literal[
-    "oversize",       # payload longer than MAX_PAYLOAD_BYTES
-    "not_utf8",       # payload bytes are not UTF-8
-    "not_json",       # not parseable JSON (including nesting too deep)
-    "duplicate_key",  # an object repeats a key
-    "type",           # wrong JSON type (a bool where a number goes, a string for an integer...)
-    "missing",        # a required field is absent
-    "unknown_field",  # a field this version does not define
-    "length",         # an array of the wrong length, or too many people
-    "range",          # a value outside its allowed range, or a broken constraint (x0 <= x1, sum)
-    "format",         # a string not matching its pattern (site and camera names)
-    "non_finite",     # NaN/Infinity literal, or a number that overflows to infinity
-    "schema",         # "schema" is not SCHEMA
-    "version",        # a version this decoder does not read
-    "site",           # the site is not the subscriber's expected_site
-]
-REASONS: Final[frozenset[str]] = frozenset(get_args(Reason))
-
-_ROOT: Final[str] = "$"  # the field named by errors about the payload as a whole
 _TOP_FIELDS: Final[tuple[str, ...]] = ("schema", "version", "site", "camera", "seq", "stamp_ns", "image", "people")
+_LABEL: Final[str] = f"{SCHEMA} version {VERSION}"  # names the schema in unknown_field errors
 _PERSON_FIELDS: Final[tuple[str, ...]] = ("keypoints", "bbox", "histogram")
 _PERSON_OPTIONAL: Final[tuple[str, ...]] = ("points3d",)
 _HIST_FIELDS: Final[tuple[str, ...]] = ("bins", "values")
-_INT63: Final[int] = 2**63 - 1
 _IMAGE_MIN, _IMAGE_MAX = 16, 16384
 _MAX_COORD_M: Final[float] = 100.0
 _HIST_SIZE: Final[int] = HIST_BINS[0] * HIST_BINS[1]
@@ -90,158 +86,6 @@ _SCORE_OPEN: Final = np.array([False, False, True])  # u, v closed below; score 
 _NUMBER: Final[frozenset[type]] = frozenset({int, float})
 
 
-class DecodeError(ValueError):
-    """A payload that is not a valid Observation.
-
-    Attributes:
-        field: dotted path of the offending value, e.g. ``people[2].keypoints[5][1]``; ``$`` for
-            the payload as a whole.
-        reason: one of ``REASONS``, for counting rejects.
-        detail: what was wrong and what is allowed.
-    """
-
-    def __init__(self, field: str, reason: Reason, detail: str) -> None:
-        super().__init__(f"{field}: {detail}")
-        self.field = field
-        self.reason = reason
-        self.detail = detail
-
-    def __reduce__(self):  # pickle with all three arguments, not just the message
-        return (type(self), (self.field, self.reason, self.detail))
-
-
-def _fail(field: str, reason: Reason, detail: str) -> NoReturn:
-    raise DecodeError(field or _ROOT, reason, detail)
-
-
-def _brief(value: Any) -> str:
-    """A short description of a JSON value for error messages (never a deep repr)."""
-    if value is None:
-        return "null"
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, str):
-        return repr(value[:40] + "...") if len(value) > 40 else repr(value)
-    if isinstance(value, list):
-        return f"an array of {len(value)}"
-    if isinstance(value, dict):
-        return f"an object with {len(value)} keys"
-    text = repr(value)
-    return text if len(text) <= 40 else text[:40] + "..."
-
-
-def _join(path: str, key: str) -> str:
-    key = key if len(key) <= 40 else key[:40] + "..."
-    return f"{path}.{key}" if path else key
-
-
-# --- parsing -------------------------------------------------------------------------------
-
-
-class _DuplicateKeys(dict):
-    """A parsed object that repeated a key; reported with its path once the path is known."""
-
-    __slots__ = ("duplicate",)
-
-
-class _Constant(Exception):
-    pass
-
-
-def _object_pairs(pairs: list[tuple[str, Any]]) -> dict:
-    obj = dict(pairs)
-    if len(obj) == len(pairs):
-        return obj
-    seen: set[str] = set()
-    for key, _ in pairs:
-        if key in seen:
-            break
-        seen.add(key)
-    dup = _DuplicateKeys(obj)
-    dup.duplicate = key
-    return dup
-
-
-def _reject_constant(name: str) -> NoReturn:
-    raise _Constant(name)
-
-
-def _parse(payload: Any) -> Any:
-    """Size check, UTF-8, JSON; returns the parsed document."""
-    if isinstance(payload, (bytes, bytearray)):
-        size = len(payload)
-    elif isinstance(payload, memoryview):
-        size = payload.nbytes
-    elif hasattr(payload, "to_bytes") and hasattr(payload, "__len__"):  # zenoh.ZBytes
-        size = len(payload)
-    else:
-        _fail(_ROOT, "type", f"must be bytes, bytearray, memoryview or zenoh.ZBytes, got {type(payload).__name__}")
-    if size > MAX_PAYLOAD_BYTES:
-        _fail(_ROOT, "oversize", f"is {size} bytes, more than the {MAX_PAYLOAD_BYTES} allowed")
-    if isinstance(payload, memoryview):
-        data = payload if payload.c_contiguous else payload.tobytes()
-    elif isinstance(payload, (bytes, bytearray)):
-        data = payload
-    else:
-        data = payload.to_bytes()
-    try:
-        text = str(data, "utf-8")
-    except UnicodeDecodeError as e:
-        _fail(_ROOT, "not_utf8", f"is not UTF-8 (byte {e.start}: {e.reason})")
-    try:
-        return json.loads(text, parse_constant=_reject_constant, object_pairs_hook=_object_pairs)
-    except _Constant as e:
-        _fail(_ROOT, "non_finite", f"contains the literal {e.args[0]}; numbers must be finite")
-    except json.JSONDecodeError as e:
-        _fail(_ROOT, "not_json", f"is not JSON ({e.msg} at line {e.lineno} column {e.colno})")
-    except RecursionError:
-        _fail(_ROOT, "not_json", "is nested too deeply to parse")
-    except ValueError as e:  # e.g. an integer literal longer than Python's 4300-digit limit
-        _fail(_ROOT, "not_json", f"is not parseable JSON ({str(e)[:80]})")
-
-
-# --- validation: scalars and objects -------------------------------------------------------
-
-
-def _object(value: Any, path: str, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> dict:
-    if not isinstance(value, dict):
-        _fail(path, "type", f"must be an object, got {_brief(value)}")
-    if isinstance(value, _DuplicateKeys):
-        _fail(_join(path, value.duplicate), "duplicate_key", "appears more than once in its object")
-    for key in value:
-        if key not in required and key not in optional:
-            allowed = ", ".join(required + optional)
-            _fail(_join(path, key), "unknown_field", f"is not a field of {SCHEMA} version {VERSION}; allowed: {allowed}")
-    for key in required:
-        if key not in value:
-            _fail(_join(path, key), "missing", "is required")
-    return value
-
-
-def _int(value: Any, path: str, lo: int, hi: int) -> int:
-    if type(value) is not int:
-        _fail(path, "type", f"must be an integer in [{lo}, {hi}], got {_brief(value)}")
-    if not lo <= value <= hi:
-        _fail(path, "range", f"must be in [{lo}, {hi}], got {value}")
-    return value
-
-
-def _int_pair(value: Any, path: str, lo: int, hi: int) -> tuple[int, int]:
-    if not isinstance(value, list):
-        _fail(path, "type", f"must be an array of 2 integers in [{lo}, {hi}], got {_brief(value)}")
-    if len(value) != 2:
-        _fail(path, "length", f"must have 2 entries, has {len(value)}")
-    return _int(value[0], f"{path}[0]", lo, hi), _int(value[1], f"{path}[1]", lo, hi)
-
-
-def _name(value: Any, path: str) -> str:
-    if not isinstance(value, str):
-        _fail(path, "type", f"must be a string, got {_brief(value)}")
-    if not NAME_RE.fullmatch(value):
-        _fail(path, "format", f"must be 1-64 characters of letters, digits, '_' or '-', got {_brief(value)}")
-    return value
-
-
 # --- validation: numeric arrays ------------------------------------------------------------
 
 
@@ -249,16 +93,16 @@ def _numbers(flat: list, where: Callable[[int], str]) -> NDArray[np.float64]:
     """Finite numbers as float64; ``where(k)`` names the k-th element in errors."""
     if not _NUMBER.issuperset(map(type, flat)):  # bools, strings, nulls, arrays, objects
         k = next(k for k, x in enumerate(flat) if type(x) not in _NUMBER)
-        _fail(where(k), "type", f"must be a number, got {_brief(flat[k])}")
+        fail(where(k), "type", f"must be a number, got {brief(flat[k])}")
     try:
         a = np.array(flat, dtype=np.float64)
     except OverflowError:  # an integer beyond float64
         k = next(k for k, x in enumerate(flat) if type(x) is int and _overflows(x))
-        _fail(where(k), "non_finite", f"must be a finite number, got an integer of {len(str(abs(flat[k])))} digits")
+        fail(where(k), "non_finite", f"must be a finite number, got an integer of {len(str(abs(flat[k])))} digits")
     finite = np.isfinite(a)
     if not finite.all():  # 1e400 parses as inf
         k = int(np.argmin(finite))
-        _fail(where(k), "non_finite", f"must be a finite number, got {_brief(flat[k])}")
+        fail(where(k), "non_finite", f"must be a finite number, got {brief(flat[k])}")
     return a
 
 
@@ -278,32 +122,28 @@ def _check_range(
     bad = (a < lo) | (a > hi) | (open_lo & (a <= lo))
     if bad.any():
         k = int(np.argmax(bad.ravel()))
-        _fail(where(k), "range", f"must be in {interval(k)}, got {a.ravel()[k]:g}")
+        fail(where(k), "range", f"must be in {interval(k)}, got {a.ravel()[k]:g}")
 
 
 def _vector(value: Any, path: str, n: int, what: str) -> NDArray[np.float64]:
-    if not isinstance(value, list):
-        _fail(path, "type", f"must be an array of {n} {what}, got {_brief(value)}")
-    if len(value) != n:
-        _fail(path, "length", f"must have {n} entries, has {len(value)}")
-    return _numbers(value, lambda k: f"{path}[{k}]")
+    return _numbers(check_array(value, path, n, what), lambda k: f"{path}[{k}]")
 
 
 def _joints(value: Any, path: str, what: str) -> tuple[list[int], NDArray[np.float64]]:
     """17 entries, each null or 3 numbers: (indices of the present joints, (P, 3) values)."""
     if not isinstance(value, list):
-        _fail(path, "type", f"must be an array of {NUM_KEYPOINTS} entries, each {what} or null, got {_brief(value)}")
+        fail(path, "type", f"must be an array of {NUM_KEYPOINTS} entries, each {what} or null, got {brief(value)}")
     if len(value) != NUM_KEYPOINTS:
-        _fail(path, "length", f"must have {NUM_KEYPOINTS} entries (COCO-17), has {len(value)}")
+        fail(path, "length", f"must have {NUM_KEYPOINTS} entries (COCO-17), has {len(value)}")
     present: list[int] = []
     flat: list = []
     for j, row in enumerate(value):
         if row is None:
             continue
         if not isinstance(row, list):
-            _fail(f"{path}[{j}]", "type", f"must be {what} or null, got {_brief(row)}")
+            fail(f"{path}[{j}]", "type", f"must be {what} or null, got {brief(row)}")
         if len(row) != 3:
-            _fail(f"{path}[{j}]", "length", f"must have 3 entries ({what}), has {len(row)}")
+            fail(f"{path}[{j}]", "length", f"must have 3 entries ({what}), has {len(row)}")
         present.append(j)
         flat += row
     a = _numbers(flat, lambda k: f"{path}[{present[k // 3]}][{k % 3}]")
@@ -317,7 +157,7 @@ def _scatter(present: list[int], values: NDArray[np.float32]) -> NDArray[np.floa
 
 
 def _person(p: Any, path: str, width: int, height: int) -> PersonView:
-    _object(p, path, _PERSON_FIELDS, _PERSON_OPTIONAL)
+    check_object(p, path, _PERSON_FIELDS, _PERSON_OPTIONAL, label=_LABEL)
     # Detectors extrapolate joints a little outside the image.
     u_lo, u_hi, v_lo, v_hi = -width, 2 * width, -height, 2 * height
 
@@ -329,7 +169,7 @@ def _person(p: Any, path: str, width: int, height: int) -> PersonView:
     kp32 = kp.astype(np.float32)
     if (kp32[:, 2] <= 0).any():  # a positive score below float32's range
         k = int(np.argmax(kp32[:, 2] <= 0)) * 3 + 2
-        _fail(kp_where(k), "range", f"must be in (0, 1] and representable as float32, got {kp[k // 3, 2]:g}")
+        fail(kp_where(k), "range", f"must be in (0, 1] and representable as float32, got {kp[k // 3, 2]:g}")
 
     bb_path = f"{path}.bbox"
     bbox = _vector(p["bbox"], bb_path, 4, "numbers [x0, y0, x1, y1]")
@@ -338,19 +178,19 @@ def _person(p: Any, path: str, width: int, height: int) -> PersonView:
                  lambda k: f"[{u_lo}, {u_hi}] (pixels)" if k % 2 == 0 else f"[{v_lo}, {v_hi}] (pixels)")
     for k in (2, 3):
         if bbox[k] < bbox[k - 2]:
-            _fail(bb_where(k), "range", f"must be >= {bb_path}[{k - 2}] = {bbox[k - 2]:g}, got {bbox[k]:g}")
+            fail(bb_where(k), "range", f"must be >= {bb_path}[{k - 2}] = {bbox[k - 2]:g}, got {bbox[k]:g}")
 
     h_path = f"{path}.histogram"
-    hist = _object(p["histogram"], h_path, _HIST_FIELDS)
-    bins = _int_pair(hist["bins"], f"{h_path}.bins", 1, 1024)
+    hist = check_object(p["histogram"], h_path, _HIST_FIELDS, label=_LABEL)
+    bins = check_int_pair(hist["bins"], f"{h_path}.bins", 1, 1024)
     if bins != HIST_BINS:
-        _fail(f"{h_path}.bins", "range", f"must be {list(HIST_BINS)} (hue x saturation), got {list(bins)}")
+        fail(f"{h_path}.bins", "range", f"must be {list(HIST_BINS)} (hue x saturation), got {list(bins)}")
     v_path = f"{h_path}.values"
     values = _vector(hist["values"], v_path, _HIST_SIZE, "numbers in [0, 1]")
     _check_range(values, np.array(0.0), np.array(1.0), lambda k: f"{v_path}[{k}]", lambda k: "[0, 1]")
     total = float(values.sum())
     if total != 0.0 and abs(total - 1.0) > _HIST_SUM_TOL:
-        _fail(v_path, "range", f"must sum to 0 or to 1 +- {_HIST_SUM_TOL:g}, sums to {total:g}")
+        fail(v_path, "range", f"must sum to 0 or to 1 +- {_HIST_SUM_TOL:g}, sums to {total:g}")
     if total > 0.0:
         values /= total  # hand consumers the documented invariant: sums to 1
 
@@ -372,37 +212,16 @@ def _person(p: Any, path: str, width: int, height: int) -> PersonView:
 
 
 def _observation(doc: Any, expected_site: str | None) -> Observation:
-    if not isinstance(doc, dict):
-        _fail(_ROOT, "type", f"must be a JSON object, got {_brief(doc)}")
-    if isinstance(doc, _DuplicateKeys):
-        _fail(_join("", doc.duplicate), "duplicate_key", "appears more than once in its object")
-    # Schema and version first, so a newer message is reported as such, not as unknown fields.
-    if "schema" not in doc:
-        _fail("schema", "missing", f"is required and must be {SCHEMA!r}")
-    if doc["schema"] != SCHEMA:
-        _fail("schema", "schema", f"must be {SCHEMA!r}, got {_brief(doc['schema'])}")
-    if "version" not in doc:
-        _fail("version", "missing", f"is required; this decoder reads version {VERSION}")
-    version = doc["version"]
-    if type(version) is not int:
-        _fail("version", "type", f"must be the integer {VERSION}, got {_brief(version)}")
-    if version != VERSION:
-        _fail("version", "version", f"{version} is not supported; this decoder reads version {VERSION}")
-    _object(doc, "", _TOP_FIELDS)
+    check_message(doc, SCHEMA, VERSION, _TOP_FIELDS)
 
-    site = _name(doc["site"], "site")
+    site = check_name(doc["site"], "site")
     if expected_site is not None and site != expected_site:
-        _fail("site", "site", f"must be {expected_site!r} (this subscriber's site), got {site!r}")
-    camera = _name(doc["camera"], "camera")
-    seq = _int(doc["seq"], "seq", 0, _INT63)
-    stamp_ns = _int(doc["stamp_ns"], "stamp_ns", 0, _INT63)
-    width, height = _int_pair(doc["image"], "image", _IMAGE_MIN, _IMAGE_MAX)
-
-    people = doc["people"]
-    if not isinstance(people, list):
-        _fail("people", "type", f"must be an array of at most {MAX_PEOPLE} people, got {_brief(people)}")
-    if len(people) > MAX_PEOPLE:
-        _fail("people", "length", f"must have at most {MAX_PEOPLE} entries, has {len(people)}")
+        fail("site", "site", f"must be {expected_site!r} (this subscriber's site), got {site!r}")
+    camera = check_name(doc["camera"], "camera")
+    seq = check_int(doc["seq"], "seq", 0, MAX_INT63)
+    stamp_ns = check_int(doc["stamp_ns"], "stamp_ns", 0, MAX_INT63)
+    width, height = check_int_pair(doc["image"], "image", _IMAGE_MIN, _IMAGE_MAX)
+    people = check_array_max(doc["people"], "people", MAX_PEOPLE, "people")
     return Observation(
         site=site, camera=camera, seq=seq, stamp_ns=stamp_ns, width=width, height=height,
         people=tuple(_person(p, f"people[{i}]", width, height) for i, p in enumerate(people)),
@@ -426,12 +245,7 @@ def decode(payload: bytes | bytearray | memoryview, *, expected_site: str | None
     Raises:
         DecodeError: for any invalid payload; ``field`` names the value, ``reason`` is in ``REASONS``.
     """
-    return _observation(_parse(payload), expected_site)
-
-
-def _as_int(value: Any) -> Any:
-    # numpy integers are fine in memory; anything else is left for validation to reject.
-    return int(value) if isinstance(value, numbers.Integral) and not isinstance(value, bool) else value
+    return _observation(parse_json(payload, MAX_PAYLOAD_BYTES), expected_site)
 
 
 def _array(value: Any, shape: tuple[int, ...], field: str) -> NDArray[np.float64]:
@@ -485,9 +299,9 @@ def encode(obs: Observation) -> bytes:
         "version": VERSION,
         "site": obs.site,
         "camera": obs.camera,
-        "seq": _as_int(obs.seq),
-        "stamp_ns": _as_int(obs.stamp_ns),
-        "image": [_as_int(obs.width), _as_int(obs.height)],
+        "seq": as_int(obs.seq),
+        "stamp_ns": as_int(obs.stamp_ns),
+        "image": [as_int(obs.width), as_int(obs.height)],
         "people": [_person_doc(p, f"people[{i}]") for i, p in enumerate(obs.people)],
     }
     # Refuse to send what every subscriber would reject: fail here, where the bug is.
