@@ -1,0 +1,182 @@
+"""Estimators: the views of each person -> (x, y, yaw) on the floor, one batched call per tick.
+
+``OnnxEstimator`` runs an exported pose network (``models/export.py``) with onnxruntime, on
+the superbody graphs of ``host.graph``. numpy and onnxruntime only: the host never imports
+torch.
+
+The model's output ``pose`` (B, 4) is (x, y, sin yaw, cos yaw) with x, y in metres in the frame
+its metadata names (``pose.frame``):
+
+- ``"world"``: the site's world frame ("site" variant models).
+- ``"floor_centre"``: relative to the serving site's floor centre (``host.graph.floor_centre``),
+  world axes ("rays" variant models, whose features are floor-centred too).
+
+yaw = atan2(sin, cos), wrapped to (-pi, pi] (REP-103: counter-clockwise from +x).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Final, Mapping, Protocol, Sequence, runtime_checkable
+
+import numpy as np
+import onnxruntime as ort
+from numpy.typing import NDArray
+
+from edge.observation import PersonView
+from edge.site import Site
+from host.graph import GraphSpec, Variant, build_batch, floor_centre
+
+__all__ = [
+    "Estimator",
+    "OnnxEstimator",
+    "ModelMismatchError",
+    "decode_output",
+    "META_POSE_FRAME",
+    "META_POSE_SCALE",
+    "META_POSE_ORIGIN",
+    "META_MODEL_CONFIG",
+    "META_TRAIN_CONFIG",
+    "POSE_FRAMES",
+    "INPUT_NAMES",
+    "OUTPUT_NAME",
+]
+
+# The exported models' interface and metadata keys (written by models/export.py).
+INPUT_NAMES: Final[tuple[str, ...]] = ("x", "adj", "mask")
+OUTPUT_NAME: Final[str] = "pose"
+META_POSE_FRAME: Final[str] = "pose.frame"  # "world" | "floor_centre"
+META_POSE_SCALE: Final[str] = "pose.scale"  # metres per unit of the network's raw output (informative)
+META_POSE_ORIGIN: Final[str] = "pose.origin"  # JSON [x, y]: origin of the raw output (informative)
+META_MODEL_CONFIG: Final[str] = "model.config"  # JSON: arch and hyper-parameters
+META_TRAIN_CONFIG: Final[str] = "train.config"  # JSON: the training run's config
+POSE_FRAMES: Final[tuple[str, ...]] = ("world", "floor_centre")
+
+
+class ModelMismatchError(ValueError):
+    """The model cannot serve this site (cameras, variant or input shapes differ)."""
+
+
+@runtime_checkable
+class Estimator(Protocol):
+    """Anything that turns people's views into poses, so the host can swap implementations."""
+
+    def estimate(self, view_sets: Sequence[Mapping[str, PersonView]]) -> NDArray[np.float64]:
+        """Poses (B, 3) = (x, y, yaw) in REP-103 for B people (camera id -> view each)."""
+        ...
+
+
+def decode_output(pose: NDArray, origin: NDArray) -> NDArray[np.float64]:
+    """Model output (B, 4) (x, y, sin, cos) + the frame's origin (2,) -> (B, 3) (x, y, yaw).
+
+    yaw = atan2(sin, cos) wrapped to (-pi, pi].
+    """
+    pose = np.asarray(pose, dtype=np.float64).reshape(-1, 4)
+    yaw = np.arctan2(pose[:, 2], pose[:, 3])  # [-pi, pi]
+    yaw = np.where(yaw <= -np.pi, np.pi, yaw)
+    return np.column_stack([pose[:, :2] + np.asarray(origin, dtype=np.float64), yaw])
+
+
+class OnnxEstimator:
+    """A pose network exported to ONNX, for one site.
+
+    Args:
+        model_path: the .onnx file (fp32 or int8) with superbody metadata.
+        site: the site it serves.
+        providers: onnxruntime execution providers, in order of preference.
+        intra_op_threads: threads onnxruntime may use inside one call.
+        variant: if given, the graph variant the caller expects the model to have.
+
+    Raises:
+        ModelMismatchError: the model lacks superbody metadata, or its cameras (and their
+            order, "site" variant), view slots ("rays"), variant or input shapes do not fit.
+    """
+
+    def __init__(
+        self,
+        model_path: str | Path,
+        site: Site,
+        providers: Sequence[str] = ("CPUExecutionProvider",),
+        intra_op_threads: int = 1,
+        variant: Variant | None = None,
+    ):
+        opts = ort.SessionOptions()
+        opts.intra_op_num_threads = intra_op_threads
+        opts.inter_op_num_threads = 1
+        opts.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+        self.path = Path(model_path)
+        self.session = ort.InferenceSession(str(self.path), opts, providers=list(providers))
+        self.metadata: dict[str, str] = dict(self.session.get_modelmeta().custom_metadata_map)
+        try:
+            self.spec = GraphSpec.from_metadata(self.metadata)
+        except ValueError as e:
+            raise ModelMismatchError(f"{self.path}: {e}") from None
+        self.site = site
+        self.frame = self.metadata.get(META_POSE_FRAME, "")
+        if self.frame not in POSE_FRAMES:
+            raise ModelMismatchError(f"{self.path}: metadata {META_POSE_FRAME} must be one of {', '.join(POSE_FRAMES)}, got {self.frame!r}")
+        self._check(site, variant)
+        self.origin = floor_centre(site) if self.frame == "floor_centre" else np.zeros(2)
+        self._inputs = [i.name for i in self.session.get_inputs()]
+
+    def _check(self, site: Site, variant: Variant | None) -> None:
+        spec, where = self.spec, str(self.path)
+        if variant is not None and variant != spec.variant:
+            raise ModelMismatchError(f"{where}: expected a {variant!r} variant model, this one is {spec.variant!r}")
+        if spec.variant == "site" and spec.camera_ids != site.camera_ids:
+            missing = [c for c in spec.camera_ids if c not in site.camera_ids]
+            extra = [c for c in site.camera_ids if c not in spec.camera_ids]
+            detail = (
+                f"model cameras missing from the site: {missing or 'none'}; site cameras unknown to the model: {extra or 'none'}"
+                if missing or extra
+                else "same cameras in a different order"
+            )
+            raise ModelMismatchError(
+                f"{where}: the model was trained for cameras {list(spec.camera_ids)} (in that order), "
+                f"site {site.name!r} has {list(site.camera_ids)}: {detail}"
+            )
+        if spec.variant == "rays" and len(site.cameras) > spec.max_views:
+            raise ModelMismatchError(
+                f"{where}: the model takes at most {spec.max_views} views per person, "
+                f"site {site.name!r} has {len(site.cameras)} cameras"
+            )
+        expected = {
+            "x": [spec.num_nodes, spec.num_features],
+            "adj": [spec.num_relations, spec.num_nodes, spec.num_nodes],
+            "mask": [spec.num_nodes],
+        }
+        inputs = {i.name: i.shape for i in self.session.get_inputs()}
+        for name in inputs:
+            if name not in expected:
+                raise ModelMismatchError(f"{where}: unexpected model input {name!r}; inputs are {', '.join(INPUT_NAMES)}")
+            if list(inputs[name][1:]) != expected[name]:
+                raise ModelMismatchError(
+                    f"{where}: input {name!r} has shape {inputs[name]}, the metadata's graph spec implies [batch, {', '.join(map(str, expected[name]))}]"
+                )
+        outputs = [o.name for o in self.session.get_outputs()]
+        if outputs != [OUTPUT_NAME]:
+            raise ModelMismatchError(f"{where}: model outputs are {outputs}, expected [{OUTPUT_NAME!r}]")
+
+    @property
+    def config(self) -> dict:
+        """The model's architecture config, from its metadata (empty if absent)."""
+        return json.loads(self.metadata.get(META_MODEL_CONFIG, "{}"))
+
+    def estimate(self, view_sets: Sequence[Mapping[str, PersonView]]) -> NDArray[np.float64]:
+        """Poses of a batch of people, in one onnxruntime call.
+
+        Args:
+            view_sets: per person, camera id -> that camera's view of them (1 or more).
+
+        Returns:
+            (B, 3) float64 (x, y, yaw): metres in the world frame, yaw in (-pi, pi].
+
+        Raises:
+            ValueError: a view set is empty or names a camera the model does not know.
+        """
+        if len(view_sets) == 0:
+            return np.zeros((0, 3))
+        feeds = build_batch(view_sets, self.site, self.spec).feeds()
+        (pose,) = self.session.run([OUTPUT_NAME], {name: feeds[name] for name in self._inputs})
+        return decode_output(pose, self.origin)
