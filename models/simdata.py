@@ -5,9 +5,9 @@ what each camera's detector reports, and returns one ``Sample`` per person and i
 at least one camera, with the ground truth. Work is split into seeded chunks run in parallel,
 so the result depends only on the config, not on the number of workers.
 
-Ground truth: the real recordings measure a chest-worn tracker, 0.21 m in front of the torso
-centre on average (docs/dataset.md). ``truth_offset_m`` moves the simulated truth the same
-way, so a model trained on simulation predicts what the real data measures.
+Ground truth: the torso centre, what the product reports. ``truth_offset_m`` can move it
+forward (to imitate a chest-worn tracker such as the WheresTheFellow ground truth; the
+project instead converts that dataset's truth, see models.wtf.truth_to_torso).
 
 ``random_site(rng)`` makes plausible rooms with 2-5 wall-mounted cameras, for the
 site-independent ("rays") model.
@@ -30,10 +30,7 @@ from edge.simulator import NoiseModel, World, render_views
 from edge.site import Obstacle, Site
 from models.samples import Sample
 
-__all__ = ["SimDataConfig", "generate", "random_site", "save_samples", "load_samples", "WTF_TRUTH_OFFSET_M"]
-
-# Mean forward offset of the WheresTheFellow ground truth from the torso centre (docs/dataset.md).
-WTF_TRUTH_OFFSET_M = 0.21
+__all__ = ["SimDataConfig", "generate", "random_site", "save_samples", "load_samples"]
 _CHUNK = 400
 
 

@@ -67,7 +67,14 @@ __all__ = [
     "world_to_wtf",
     "from_dataset_frame",
     "to_dataset_frame",
+    "TRUTH_OFFSET_M",
+    "truth_to_torso",
+    "torso_to_truth",
 ]
+
+# The ground truth is a chest-worn tracker, on average this far in front of the torso centre
+# that the product reports (measured from the 3D shoulders and hips, docs/dataset.md).
+TRUTH_OFFSET_M: Final[float] = 0.21
 
 # The dataset's cameraId 1, 2, 3 become the site's camera ids "1", "2", "3".
 CAMERA_IDS: Final[tuple[str, ...]] = ("1", "2", "3")
@@ -381,3 +388,16 @@ def load_wtf(path: str | Path, site: Site | None = None) -> list[Sample]:
         DatasetError: the file is unreadable or invalid, or ``site`` lacks a camera.
     """
     return to_samples(load_wtf_raw(path), site)
+
+
+def truth_to_torso(truth: ArrayLike, offset_m: float = TRUTH_OFFSET_M) -> NDArray[np.float64]:
+    """(N, 3) dataset ground truth (x, y, yaw), a chest point, to the torso centre behind it."""
+    t = np.array(truth, dtype=np.float64).reshape(-1, 3)
+    t[:, 0] -= offset_m * np.cos(t[:, 2])
+    t[:, 1] -= offset_m * np.sin(t[:, 2])
+    return t
+
+
+def torso_to_truth(pose: ArrayLike, offset_m: float = TRUTH_OFFSET_M) -> NDArray[np.float64]:
+    """(N, 3) torso poses (x, y, yaw) to the point the dataset's chest tracker measures."""
+    return truth_to_torso(pose, -offset_m)

@@ -400,3 +400,11 @@ def test_keypoint_bbox(uv, expected):
     box = keypoint_bbox(kp)
     assert box.dtype == np.float32
     assert box == pytest.approx(expected, abs=1e-4)
+
+
+def test_truth_offset_round_trip():
+    from models.wtf import TRUTH_OFFSET_M, torso_to_truth, truth_to_torso
+    pose = np.array([[1.0, 2.0, 0.0], [0.0, 0.0, np.pi / 2]])
+    chest = torso_to_truth(pose)
+    np.testing.assert_allclose(chest[:, :2] - pose[:, :2], [[TRUTH_OFFSET_M, 0.0], [0.0, TRUTH_OFFSET_M]], atol=1e-12)
+    np.testing.assert_allclose(truth_to_torso(chest), pose, atol=1e-12)
