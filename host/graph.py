@@ -62,6 +62,7 @@ __all__ = [
     "GraphSpec",
     "GraphBatch",
     "build_batch",
+    "adjacency_template",
     "floor_centre",
     "SLOT_SIZE",
     "NUM_NODE_TYPES",
@@ -324,6 +325,16 @@ def _static(spec: GraphSpec) -> _Static:
         node_x=x, slot_of={c: k for k, c in enumerate(spec.camera_ids)},
         cols={g: spec.feature_slice(g) for g in groups},
     )
+
+
+def adjacency_template(spec: GraphSpec) -> NDArray[np.float32]:
+    """(R, N, N) every edge of a graph whose nodes are all present (read-only).
+
+    Edges depend only on which nodes are present, so for any batch built with ``spec``,
+    ``adj == template * mask[:, None, :, None] * mask[:, None, None, :]``: training keeps x and
+    mask only and rebuilds adj per mini-batch.
+    """
+    return _static(spec).template
 
 
 def _slots_for(views: Mapping[str, PersonView], b: int, spec: GraphSpec, st: _Static, site_index: dict[str, int]) -> list[tuple[int, str]]:

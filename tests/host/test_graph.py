@@ -443,3 +443,19 @@ def test_bad_metadata(change, match):
 def test_unknown_feature_group():
     with pytest.raises(ValueError, match="ray"):
         GraphSpec.for_site(SITE).feature_slice("ray")
+
+
+def test_adjacency_is_the_template_masked_by_present_nodes():
+    from edge.site import load_site
+    from host.graph import adjacency_template
+    from models.simdata import SimDataConfig, generate
+    from tests.conftest import WTF_SITE
+
+    site = load_site(WTF_SITE)
+    samples = generate(site, SimDataConfig(samples=60, seed=5), workers=1, progress=False)
+    for variant in ("site", "rays"):
+        spec = GraphSpec.for_site(site, variant=variant)
+        batch = build_batch([s.views for s in samples], site, spec)
+        m = batch.mask
+        rebuilt = adjacency_template(spec)[None] * m[:, None, :, None] * m[:, None, None, :]
+        np.testing.assert_array_equal(rebuilt, batch.adj)
