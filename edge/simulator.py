@@ -183,103 +183,223 @@ def skeleton(x: float, y: float, yaw: float, phase: float, walk: float, height_m
     return j
 
 
-@dataclass
 class _Plan:
-    """A person's periodic motion plan: segments of (start time, kind, parameters)."""
+    """A person's motion plan: segments (start time, kind, parameters) in plan time, with
+    vectorised floor positions so that other people's plans can be checked against it."""
 
-    starts: list[float] = field(default_factory=list)
-    segments: list[tuple] = field(default_factory=list)
-    period: float = 0.0
+    def __init__(self) -> None:
+        self.starts: list[float] = []
+        self.segments: list[tuple] = []
+        self.end = 0.0  # plan time at which the last segment ends
+        self.period = 0.0  # set by the World: every person's plan repeats with the same period
+        self.last = np.zeros(2)  # where the person is at ``end`` (and stays until ``period``)
+        self._arrays: tuple | None = None
+
+    def add(self, duration: float, seg: tuple) -> None:
+        self.starts.append(self.end)
+        self.segments.append((duration,) + seg)
+        self.end += duration
+        self.last = np.asarray(seg[2] if seg[0] == "walk" else seg[1], dtype=np.float64)
+        self._arrays = None
+
+    def positions(self, taus: NDArray) -> NDArray[np.float64]:
+        """(T, 2) floor positions at plan times ``taus`` (T,); beyond ``end``, the last position."""
+        if not self.segments:
+            return np.broadcast_to(self.last, (len(taus), 2))
+        if self._arrays is None:
+            st = np.array(self.starts)
+            dur = np.array([g[0] for g in self.segments])
+            p0 = np.array([g[2] for g in self.segments])
+            p1 = np.array([g[3] if g[1] == "walk" else g[2] for g in self.segments])
+            self._arrays = (st, dur, p0, p1)
+        st, dur, p0, p1 = self._arrays
+        i = np.clip(np.searchsorted(st, taus, side="right") - 1, 0, len(st) - 1)
+        u = np.clip((taus - st[i]) / np.maximum(dur[i], 1e-9), 0.0, 1.0)[:, None]
+        return np.where((taus >= self.end)[:, None], self.last, p0[i] + u * (p1[i] - p0[i]))
+
+
+# People keep at least this far apart (centre to centre): real people do not walk through each other.
+_CLEARANCE_M: Final = 0.6
+
+
+class _Planner:
+    """Builds one person's plan an action at a time, keeping clear of the others' plans."""
+
+    def __init__(self, person: SimPerson, rng: np.random.Generator, free: _FreeSpace, others: list[_Planner]):
+        self.rng, self.free, self.others = rng, free, others
+        self.plan = _Plan()
+        self.stride = 0.75 * person.appearance.height_m / 1.75
+        for _ in range(200):
+            start = free.random_point(rng)
+            if all(np.linalg.norm(o.start - start) >= _CLEARANCE_M + 0.2 for o in others):
+                break
+        self.start = self.pos = start
+        self.plan.last = start
+        self.yaw = float(rng.uniform(-np.pi, np.pi))
+
+    def _clear(self, t0: float, t1: float, p0: NDArray, p1: NDArray) -> bool:
+        """Whether moving p0 -> p1 over [t0, t1] keeps clear of the others: never closer than
+        the clearance, or than they already are (so two people too close can move apart)."""
+        # After the move this person stays at p1 while the others' known plans go on: check that too.
+        horizon = max([t1] + [o.plan.end for o in self.others])
+        taus = np.linspace(t0, horizon, max(2, int((horizon - t0) / 0.1) + 1))
+        u = np.clip((taus - t0) / max(t1 - t0, 1e-9), 0.0, 1.0)[:, None]
+        mine = p0 + u * (p1 - p0)  # (T, 2)
+        for o in self.others:
+            d = np.linalg.norm(o.plan.positions(taus) - mine, axis=1)  # (T,)
+            if d.min() < min(_CLEARANCE_M, d[0] - 1e-6):
+                return False
+        return True
+
+    def stand(self, duration: float, force: bool = False) -> bool:
+        t = self.plan.end
+        if not force and not self._clear(t, t + duration, self.pos, self.pos):
+            return False
+        self.plan.add(duration, ("stand", self.pos.copy(), self.yaw))
+        return True
+
+    def turn(self, angle: float, rate: float) -> bool:
+        duration = max(abs(angle) / rate, 0.05)
+        t = self.plan.end
+        if not self._clear(t, t + duration, self.pos, self.pos):
+            return False
+        self.plan.add(duration, ("turn", self.pos.copy(), self.yaw, angle))
+        self.yaw = float(wrap_angle(self.yaw + angle))
+        return True
+
+    def walk_to(self, target: NDArray, speed: float, yaw_offset: float = 0.0) -> bool:
+        d = target - self.pos
+        dist = float(np.linalg.norm(d))
+        if dist < 1e-3:
+            return True
+        new_yaw = float(wrap_angle(math.atan2(d[1], d[0]) + yaw_offset))
+        angle = float(wrap_angle(new_yaw - self.yaw))
+        t_turn = abs(angle) / 2.5 if abs(angle) > 1e-3 else 0.0  # turn in place at ~140 deg/s
+        t = self.plan.end
+        if not (self.free.segment_free(self.pos, target) and self._clear(t, t + t_turn, self.pos, self.pos)
+                and self._clear(t + t_turn, t + t_turn + dist / speed, self.pos, target)):
+            return False
+        if t_turn:
+            self.turn(angle, 2.5)
+        self.plan.add(dist / speed, ("walk", self.pos.copy(), target.copy(), new_yaw, self.stride))
+        self.pos, self.yaw = target, new_yaw
+        return True
+
+    def step(self) -> None:
+        """Add one action: walk somewhere, side-step, turn, or stand; wait a moment if blocked."""
+        rng = self.rng
+        r = rng.uniform()
+        if r < 0.55:  # walk to a random point
+            done = self.walk_to(self.free.random_point(rng), float(rng.uniform(0.6, 1.4)))
+        elif r < 0.65:  # side-step or step backwards a short way
+            off = float(rng.choice([np.pi / 2, -np.pi / 2, np.pi]))
+            done = self.walk_to(self.free.random_point(rng, near=self.pos, max_dist=1.5), float(rng.uniform(0.3, 0.6)), off)
+        elif r < 0.8:  # turn in place
+            done = self.turn(float(rng.uniform(-np.pi, np.pi)), float(rng.uniform(1.0, 3.0)))
+        else:  # stand still
+            done = self.stand(float(rng.uniform(0.5, 4.0)))
+        if not done and not self.stand(0.3):
+            # Someone is coming through here: step aside if possible, else let them pass close by.
+            for _ in range(10):
+                if self.walk_to(self.free.random_point(rng, near=self.pos, max_dist=1.0), 1.2):
+                    return
+            self.stand(0.3, force=True)
+
+    def close(self) -> None:
+        """Walk back to the start and face the starting direction, so the plan can repeat."""
+        for _ in range(40):
+            if self.walk_to(self.start, 1.0):
+                break
+            via = self.free.random_point(self.rng)
+            if self.free.segment_free(via, self.start) and self.walk_to(via, 1.0) and self.walk_to(self.start, 1.0):
+                break
+            self.stand(0.5, force=True)
+        if np.linalg.norm(self.pos - self.start) > 1e-6:  # rare: walk back regardless
+            d = self.start - self.pos
+            self.yaw = math.atan2(d[1], d[0])
+            self.plan.add(float(np.linalg.norm(d)), ("walk", self.pos.copy(), self.start.copy(), self.yaw, self.stride))
+            self.pos = self.start
+        first = self.plan.segments[0]
+        first_yaw = first[3] if first[1] in ("stand", "turn") else first[4]
+        angle = float(wrap_angle(first_yaw - self.yaw))
+        self.plan.add(max(abs(angle) / 2.5, 0.05), ("turn", self.pos.copy(), self.yaw, angle))
+        self.yaw = first_yaw
+
+
+class _FreeSpace:
+    """Where a person's centre may be: inside the floor polygon and clear of obstacles, on a
+    5 cm grid, so that path checks are array lookups."""
+
+    _CELL = 0.05
+
+    def __init__(self, site: Site, margin: float = _PERSON_RADIUS_M + 0.1):
+        poly = np.asarray(site.floor, dtype=np.float32)
+        self.lo = poly.min(0) - self._CELL
+        shape = np.ceil((poly.max(0) + self._CELL - self.lo) / self._CELL).astype(int) + 1
+        xs = self.lo[0] + np.arange(shape[0]) * self._CELL
+        ys = self.lo[1] + np.arange(shape[1]) * self._CELL
+        gx, gy = np.meshgrid(xs, ys, indexing="ij")
+        contour = poly.reshape(-1, 1, 2)
+        dist = np.array([cv2.pointPolygonTest(contour, (float(x), float(y)), True) for x, y in zip(gx.ravel(), gy.ravel())]).reshape(gx.shape)
+        free = dist >= margin
+        for o in site.obstacles:
+            free &= ~((gx >= o.min[0] - margin) & (gx <= o.max[0] + margin) & (gy >= o.min[1] - margin) & (gy <= o.max[1] + margin))
+        if not free.any():
+            raise ValueError(f"site {site.name!r}: no free floor (floor too small or covered by obstacles)")
+        self.free = free
+        self.cells = np.argwhere(free)
+
+    def _ok(self, pts: NDArray) -> NDArray[np.bool_]:
+        ij = np.round((pts - self.lo) / self._CELL).astype(int)
+        inside = (ij >= 0).all(1) & (ij[:, 0] < self.free.shape[0]) & (ij[:, 1] < self.free.shape[1])
+        ij = np.clip(ij, 0, np.array(self.free.shape) - 1)
+        return inside & self.free[ij[:, 0], ij[:, 1]]
+
+    def segment_free(self, a: NDArray, b: NDArray) -> bool:
+        n = max(2, int(np.linalg.norm(b - a) / 0.05) + 1)
+        return bool(self._ok(np.linspace(a, b, n)).all())
+
+    def random_point(self, rng: np.random.Generator, near: NDArray | None = None, max_dist: float = math.inf) -> NDArray:
+        """A random free point (within ``max_dist`` of ``near`` if given, when one exists)."""
+        cells = self.cells
+        if near is not None:
+            close = np.linalg.norm(self.lo + cells * self._CELL - near, axis=1) <= max_dist
+            if close.any():
+                cells = cells[close]
+        return self.lo + (cells[rng.integers(len(cells))] + rng.uniform(-0.5, 0.5, 2)) * self._CELL
 
 
 class SimPerson:
-    """One simulated person: appearance and a periodic plan of motion through the site."""
+    """One simulated person: appearance and a periodic plan of motion through the site (made
+    by the ``World`` together with everyone else's, see ``World``)."""
 
-    def __init__(self, site: Site, rng: np.random.Generator, period_s: float = 600.0):
-        self.site = site
-        h = float(np.clip(rng.normal(1.72, 0.08), 1.5, 1.95))
-        self.appearance = _random_appearance(rng, h)
-        self.phase_offset = float(rng.uniform(0, period_s))
-        self._plan = self._make_plan(rng, period_s)
-
-    # -- planning ---------------------------------------------------------------------------
-
-    def _make_plan(self, rng: np.random.Generator, period_s: float) -> _Plan:
-        plan = _Plan()
-        start = _random_free_point(self.site, rng)
-        pos, yaw, t = start, float(rng.uniform(-np.pi, np.pi)), 0.0
-        stride = 0.75 * self.appearance.height_m / 1.75
-
-        def add(duration: float, seg: tuple) -> None:
-            nonlocal t
-            plan.starts.append(t)
-            plan.segments.append((duration,) + seg)
-            t += duration
-
-        def walk_to(target: NDArray, speed: float, yaw_offset: float = 0.0) -> None:
-            nonlocal pos, yaw
-            d = target - pos
-            dist = float(np.linalg.norm(d))
-            if dist < 1e-3:
-                return
-            heading = math.atan2(d[1], d[0])
-            new_yaw = float(wrap_angle(heading + yaw_offset))
-            turn = float(wrap_angle(new_yaw - yaw))
-            if abs(turn) > 1e-3:
-                add(abs(turn) / 2.5, ("turn", pos.copy(), yaw, turn))  # turn in place at ~140 deg/s
-            add(dist / speed, ("walk", pos.copy(), target.copy(), new_yaw, stride))
-            pos, yaw = target, new_yaw
-
-        while t < period_s:
-            r = rng.uniform()
-            if r < 0.55:  # walk to a random reachable point
-                target = _random_reachable(self.site, rng, pos)
-                if target is not None:
-                    walk_to(target, float(rng.uniform(0.6, 1.4)))
-            elif r < 0.65:  # side-step or step backwards a short way
-                off = float(rng.choice([np.pi / 2, -np.pi / 2, np.pi]))
-                target = _random_reachable(self.site, rng, pos, max_dist=1.5)
-                if target is not None:
-                    walk_to(target, float(rng.uniform(0.3, 0.6)), yaw_offset=off)
-            elif r < 0.8:  # turn in place
-                turn = float(rng.uniform(-np.pi, np.pi))
-                add(abs(turn) / float(rng.uniform(1.0, 3.0)), ("turn", pos.copy(), yaw, turn))
-                yaw = float(wrap_angle(yaw + turn))
-            else:  # stand still
-                add(float(rng.uniform(0.5, 4.0)), ("stand", pos.copy(), yaw))
-        # Close the loop: walk back to the start and face the starting direction.
-        for _ in range(50):
-            if _segment_free(self.site, pos, start):
-                break
-            via = _random_reachable(self.site, rng, pos)
-            if via is not None and _segment_free(self.site, via, start):
-                walk_to(via, 1.0)
-                break
-        walk_to(start, 1.0)
-        first = plan.segments[0]
-        first_yaw = first[3] if first[1] in ("stand", "turn") else first[4]
-        turn = float(wrap_angle(first_yaw - yaw))
-        add(max(abs(turn) / 2.5, 0.05), ("turn", pos.copy(), yaw, turn))
-        plan.period = t
-        return plan
+    def __init__(self, appearance: Appearance):
+        self.appearance = appearance
+        self.phase_offset = 0.0
+        self._plan = _Plan()
 
     # -- state at a time ----------------------------------------------------------------------
 
     def state(self, t_s: float) -> PersonState:
         """The person's pose and joints at absolute time ``t_s`` (seconds)."""
         tau = (t_s + self.phase_offset) % self._plan.period
+        a = self.appearance
+        if tau >= self._plan.end:  # waiting at the start for the others' plans to end
+            seg = self._plan.segments[0]
+            yaw = seg[3] if seg[1] in ("stand", "turn") else seg[4]
+            x, y = float(self._plan.last[0]), float(self._plan.last[1])
+            return PersonState(x, y, float(wrap_angle(yaw)), skeleton(x, y, yaw, 0.0, 0.0, a.height_m, a.width_scale))
         i = max(bisect.bisect_right(self._plan.starts, tau) - 1, 0)
         seg = self._plan.segments[i]
         u = min(max((tau - self._plan.starts[i]) / seg[0], 0.0), 1.0) if seg[0] > 0 else 1.0
         kind = seg[1]
-        a = self.appearance
         if kind == "walk":
             _, _, p0, p1, yaw, stride = seg
             p = p0 + u * (p1 - p0)
             travelled = u * float(np.linalg.norm(p1 - p0))
             # A little ramp at both ends so the stride starts and stops smoothly.
             walk = min(1.0, travelled / 0.3, (1 - u) * float(np.linalg.norm(p1 - p0)) / 0.3 + 0.2)
-            phase = 2 * np.pi * travelled / (2 * stride) + self.phase_offset
+            phase = 2 * np.pi * travelled / (2 * stride)
             x, y = float(p[0]), float(p[1])
         elif kind == "turn":
             _, _, p0, yaw0, turn = seg
@@ -296,11 +416,16 @@ class SimPerson:
 class World:
     """People moving through a site, as a pure function of time.
 
+    Plans are made together, an action at a time for whoever's plan ends first, each action
+    checked against what the others will be doing, so nobody walks through anybody. They
+    share one period (the others wait at their start for the longest), so the whole scene
+    repeats.
+
     Args:
         site: the site (floor polygon, obstacles, cameras).
         num_people: how many people.
         seed: every person's body, clothes and plan follow from it.
-        period_s: each person's plan repeats after about this long.
+        period_s: the plans repeat after about this long.
     """
 
     def __init__(self, site: Site, num_people: int = 3, seed: int = 0, period_s: float = 600.0):
@@ -310,15 +435,46 @@ class World:
         self.seed = seed
         rng = np.random.default_rng([seed, 0x5B0D])
         hues = _distinct_hues(rng, num_people)
-        self.people = []
+        free = _free_space(site)
+        self.people: list[SimPerson] = []
+        planners: list[_Planner] = []
         for k in range(num_people):
-            p = SimPerson(site, np.random.default_rng([seed, k]), period_s)
-            p.appearance = _recolour(p.appearance, hues[k], rng)
-            self.people.append(p)
+            prng = np.random.default_rng([seed, k])
+            h = float(np.clip(prng.normal(1.72, 0.08), 1.5, 1.95))
+            person = SimPerson(_recolour(_random_appearance(prng, h), hues[k], rng))
+            planners.append(_Planner(person, prng, free, list(planners)))
+            self.people.append(person)
+        for p in planners:
+            p.others = [o for o in planners if o is not p]
+        active = list(planners)
+        while active:
+            p = min(active, key=lambda q: q.plan.end)
+            p.step()
+            if p.plan.end >= period_s:
+                active.remove(p)
+        for p in planners:
+            p.close()
+        period = max((p.plan.end for p in planners), default=period_s)
+        offset = float(rng.uniform(0, period))
+        for person, p in zip(self.people, planners):
+            p.plan.period = period
+            person._plan = p.plan
+            person.phase_offset = offset
 
     def states(self, t_s: float) -> list[PersonState]:
         """Every person's state at absolute time ``t_s`` (seconds)."""
         return [p.state(t_s) for p in self.people]
+
+
+_FREE_CACHE: dict[int, tuple[Site, _FreeSpace]] = {}
+
+
+def _free_space(site: Site) -> _FreeSpace:
+    hit = _FREE_CACHE.get(id(site))
+    if hit is None or hit[0] is not site:
+        hit = (site, _FreeSpace(site))
+        _FREE_CACHE[id(site)] = hit
+    return hit[1]
 
 
 # -- rendering what a camera's detector reports ------------------------------------------------------
@@ -472,42 +628,6 @@ def _recolour(a: Appearance, hue: int, rng: np.random.Generator) -> Appearance:
         a.height_m, a.width_scale, (hue, int(rng.integers(140, 240)), a.shirt_hsv[2]),
         (trousers_hue, a.trousers_hsv[1], a.trousers_hsv[2]), a.skin_hsv,
     )
-
-
-def _inside_polygon(p: NDArray, poly: NDArray) -> bool:
-    return cv2.pointPolygonTest(poly.astype(np.float32).reshape(-1, 1, 2), (float(p[0]), float(p[1])), True) >= _PERSON_RADIUS_M + 0.1
-
-
-def _in_obstacle(p: NDArray, site: Site, margin: float = _PERSON_RADIUS_M + 0.1) -> bool:
-    return any(o.min[0] - margin <= p[0] <= o.max[0] + margin and o.min[1] - margin <= p[1] <= o.max[1] + margin for o in site.obstacles)
-
-
-def _random_free_point(site: Site, rng: np.random.Generator) -> NDArray:
-    poly = np.asarray(site.floor)
-    lo, hi = poly.min(0), poly.max(0)
-    for _ in range(10_000):
-        p = rng.uniform(lo, hi)
-        if _inside_polygon(p, poly) and not _in_obstacle(p, site):
-            return p
-    raise ValueError(f"site {site.name!r}: no free floor point found (floor too small or covered by obstacles)")
-
-
-def _segment_free(site: Site, a: NDArray, b: NDArray) -> bool:
-    poly = np.asarray(site.floor)
-    n = max(2, int(np.linalg.norm(b - a) / 0.1))
-    return all(_inside_polygon(p, poly) and not _in_obstacle(p, site) for p in np.linspace(a, b, n))
-
-
-def _random_reachable(site: Site, rng: np.random.Generator, pos: NDArray, max_dist: float = 1e9) -> NDArray | None:
-    for _ in range(50):
-        target = _random_free_point(site, rng)
-        d = target - pos
-        n = float(np.linalg.norm(d))
-        if n > max_dist:
-            target = pos + d * (max_dist / n) * rng.uniform(0.3, 1.0)
-        if np.linalg.norm(target - pos) > 0.3 and _segment_free(site, pos, target):
-            return target
-    return None
 
 
 def _occluded(origin: NDArray, joints: NDArray, k: int, centres: NDArray, heights: NDArray, site: Site | None) -> NDArray[np.bool_]:
