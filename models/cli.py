@@ -22,6 +22,14 @@ __all__ = ["register"]
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the offline commands (``calibrate``, ``train``, ``eval``, ...)."""
     _add_calibrate(sub)
+    _add_train(sub)
+    _add_eval(sub)
+
+
+def _add_train(sub: argparse._SubParsersAction) -> None:
+    from models import train  # light: torch is imported only when a run starts
+
+    train.register(sub)
 
 
 def _fail(command: str, message: str) -> int:
@@ -126,3 +134,123 @@ def _run_calibrate_from_dataset(args: argparse.Namespace) -> int:
         return _fail(command, f"{e.filename}: {e.strerror or e}")
     _print_calibration(written, fits, errors, args.out)
     return 0
+
+
+# --- eval ---------------------------------------------------------------------------------------
+
+_DEFAULT_SITE = "deploy/sites/wtf-apartment.toml"
+_BASELINE = "analytic"
+# The truth offset is a physical distance on a person: anything beyond a metre is a typo.
+_MAX_TRUTH_OFFSET_M = 1.0
+
+
+def _add_eval(sub: argparse._SubParsersAction) -> None:
+    from models.wtf import TRUTH_OFFSET_M  # numpy only
+
+    p = sub.add_parser(
+        "eval",
+        help="score models and the analytic baseline on a WheresTheFellow file",
+        description=(
+            "Run one or more ONNX models and the analytic baseline on every sample of a WheresTheFellow "
+            "JSON file and print the paper's metrics (MSE in the original code's units) and the MAE of x, y "
+            "and yaw, overall and by number of cameras. Predictions (torso centres) are moved forward by "
+            "--truth-offset to the dataset's chest-worn tracker before scoring."
+        ),
+    )
+    p.add_argument("--dataset", type=Path, required=True, metavar="PATH.json", help="WheresTheFellow JSON file (e.g. dev.json)")
+    p.add_argument(
+        "--model", type=Path, action="append", required=True, metavar="M.onnx",
+        help="ONNX model; repeat to compare several (the first is the one --json-out and --predictions-out report)",
+    )
+    p.add_argument("--site", type=Path, default=Path(_DEFAULT_SITE), metavar="SITE.toml", help="site file (default: %(default)s)")
+    p.add_argument("--json-out", type=Path, metavar="F", help="write the first model's metrics, the baseline's and the per-camera breakdown as JSON")
+    p.add_argument("--predictions-out", type=Path, metavar="F.csv",
+                   help="write the first model's predictions in the dataset's frame: index,timestamp_ms,x_mm,z_mm,angle_rad")
+    p.add_argument("--plots", type=Path, metavar="DIR", help="write PNG plots here (needs matplotlib)")
+    p.add_argument(
+        "--truth-offset", type=float, default=TRUTH_OFFSET_M, metavar="M",
+        help="metres the dataset's truth lies in front of the torso centre (default: %(default)s; 0 scores torso against tracker)",
+    )
+    p.add_argument("--batch-size", type=int, default=64, help="samples per estimator call (default: %(default)s)")
+    p.set_defaults(func=_run_eval)
+
+
+def _model_names(paths: list[Path]) -> list[str]:
+    """File names, or the paths as given where two models share a file name."""
+    names = [p.name for p in paths]
+    return [str(p) if names.count(p.name) > 1 else p.name for p in paths]
+
+
+def _run_eval(args: argparse.Namespace) -> int:
+    import math
+
+    from edge.site import SiteError, load_site
+    from models.wtf import DatasetError, load_wtf
+
+    command = "eval"
+    if not (math.isfinite(args.truth_offset) and abs(args.truth_offset) <= _MAX_TRUTH_OFFSET_M):
+        return _fail(command, f"--truth-offset must be metres in [-{_MAX_TRUTH_OFFSET_M:g}, {_MAX_TRUTH_OFFSET_M:g}], got {args.truth_offset}")
+    if args.batch_size < 1:
+        return _fail(command, f"--batch-size must be >= 1, got {args.batch_size}")
+    names = _model_names(args.model)
+    if len(set(names)) < len(names):
+        return _fail(command, f"--model: the same model is given twice: {', '.join(sorted({n for n in names if names.count(n) > 1}))}")
+    if _BASELINE in names:
+        return _fail(command, f"--model {_BASELINE!r}: the name is taken by the baseline; rename the file")
+    if args.plots is not None:
+        import importlib.util
+
+        if importlib.util.find_spec("matplotlib") is None:
+            return _fail(command, "--plots needs matplotlib (pip install 'superbody[train]')")
+    try:
+        site = load_site(args.site)
+        samples = load_wtf(args.dataset, site=site)
+        estimators = {name: _load_model(path, site) for name, path in zip(names, args.model)}
+    except (DatasetError, SiteError, ValueError) as e:  # ModelMismatchError is a ValueError
+        return _fail(command, str(e))
+
+    from host.analytic import AnalyticEstimator
+    from models.evaluate import format_table, json_report, predict, score, write_predictions_csv
+
+    estimators[_BASELINE] = AnalyticEstimator(site)
+    try:
+        predictions = {
+            name: predict(samples, est, args.batch_size, desc=name, progress=None) for name, est in estimators.items()
+        }
+    except ValueError as e:
+        return _fail(command, str(e))
+    reports = score(samples, predictions, args.truth_offset)
+    print(f"{args.dataset}: {len(samples)} samples, site {site.name!r}")
+    print(format_table(reports, args.truth_offset))
+    try:
+        if args.json_out is not None:
+            doc = json_report(reports, names, _BASELINE, args.truth_offset)
+            doc["dataset"], doc["site"] = str(args.dataset), str(args.site)
+            args.json_out.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+            print(f"wrote {args.json_out}")
+        if args.predictions_out is not None:
+            write_predictions_csv(args.predictions_out, samples, predictions[names[0]], args.truth_offset)
+            print(f"wrote {args.predictions_out}")
+        if args.plots is not None:
+            from models.plots import write_plots
+
+            for path in write_plots(args.plots, samples, predictions, args.truth_offset):
+                print(f"wrote {path}")
+    except OSError as e:
+        return _fail(command, f"{e.filename}: {e.strerror or e}")
+    return 0
+
+
+def _load_model(path: Path, site):
+    """An OnnxEstimator for the site; ValueError (one line) if the file is missing or unreadable."""
+    from host.estimator import ModelMismatchError, OnnxEstimator
+
+    if not path.is_file():
+        raise ValueError(f"--model {path}: no such file")
+    try:
+        return OnnxEstimator(path, site)
+    except ModelMismatchError:
+        raise
+    except Exception as e:  # onnxruntime's load errors (InvalidProtobuf, Fail, ...) derive from Exception only
+        detail = str(e).strip().splitlines()[-1] if str(e).strip() else type(e).__name__
+        raise ValueError(f"--model {path}: cannot load the model ({detail})") from None
