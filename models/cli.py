@@ -27,9 +27,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _add_train(sub: argparse._SubParsersAction) -> None:
-    from models import train  # light: torch is imported only when a run starts
+    from models import crossval, train  # light: torch is imported only when a run starts
 
     train.register(sub)
+    crossval.register(sub)
 
 
 def _fail(command: str, message: str) -> int:

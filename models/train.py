@@ -1,0 +1,400 @@
+"""Training: simulated samples from a site (and optionally real ones) -> a pose network ->
+fp32 and int8 ONNX, with the whole config stored in the model.
+
+    superbody train --site deploy/sites/wtf-apartment.toml --arch gat --out build/models --name wtf-gat
+
+Data: ``sim_samples`` samples simulated in the site (DS2-like; the "rays" variant can instead
+use ``random_sites`` random rooms, so the model never sees the serving layout), plus, if
+``real`` is given, the samples of a WheresTheFellow file, repeated ``real_repeat`` times per
+epoch (DS1-like mix). Real ground truth is converted to the torso centre the product reports
+(models.wtf.truth_to_torso). ``real_exclude`` holds out a contiguous range of the real file
+(cross-validation folds).
+
+Graphs are built once, keeping x and mask only; each mini-batch rebuilds its adjacency from
+the spec's template. Validation: a random ``val_fraction`` of the training data; the best
+epoch by validation loss is kept (early stopping with ``patience``); training also stops at
+``max_minutes``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import logging
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+from tqdm import tqdm
+
+from edge.angles import wrap_angle
+from edge.site import Site, SiteError, load_site
+from host.graph import GraphBatch, GraphSpec, adjacency_template, build_batch, floor_centre
+from models.samples import Sample
+
+__all__ = ["TrainConfig", "TrainResult", "train", "prepare", "register"]
+
+log = logging.getLogger("superbody.train")
+
+ARCH_DEFAULTS: dict[str, dict] = {
+    "gat": {"hidden": 48, "heads": 4, "layers": 3},
+    "rgcn": {"hidden": 48, "bases": 4, "layers": 3},
+    "mlp": {"hidden": 128, "slot_dim": 64},
+}
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Everything a training run depends on; stored in the exported model's metadata."""
+
+    site: str
+    arch: str = "gat"
+    variant: str = "site"
+    use_3d: bool = False
+    max_views: int = 4
+    hparams: dict = field(default_factory=dict)
+    sim_samples: int = 30_000
+    sim_seed: int = 0
+    random_sites: int = 0
+    real: str | None = None
+    real_exclude: tuple[int, int] | None = None
+    real_repeat: int = 20
+    epochs: int = 40
+    batch_size: int = 128
+    lr: float = 2e-3
+    weight_decay: float = 1e-4
+    patience: int = 6
+    val_fraction: float = 0.1
+    yaw_weight: float = 1.0
+    seed: int = 0
+    max_minutes: float = 15.0
+    threads: int = 2
+    init: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.arch not in ARCH_DEFAULTS:
+            raise ValueError(f"arch must be one of {', '.join(ARCH_DEFAULTS)}, got {self.arch!r}")
+        if self.variant not in ("site", "rays"):
+            raise ValueError(f"variant must be 'site' or 'rays', got {self.variant!r}")
+        if self.random_sites and self.variant != "rays":
+            raise ValueError("random_sites needs variant 'rays' (a 'site' model is tied to its site's cameras)")
+        for name, lo, hi in (("sim_samples", 0, 5_000_000), ("random_sites", 0, 10_000), ("max_views", 1, 16), ("real_repeat", 1, 1000),
+                             ("epochs", 1, 10_000), ("batch_size", 1, 65_536), ("patience", 1, 10_000), ("threads", 1, 256)):
+            v = getattr(self, name)
+            if not (isinstance(v, int) and lo <= v <= hi):
+                raise ValueError(f"{name} must be an integer in [{lo}, {hi}], got {v!r}")
+        for name, lo, hi in (("lr", 1e-6, 1.0), ("weight_decay", 0.0, 1.0), ("val_fraction", 0.0, 0.5),
+                             ("yaw_weight", 0.0, 100.0), ("max_minutes", 0.01, 10_000.0)):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and lo <= v <= hi):
+                raise ValueError(f"{name} must be in [{lo}, {hi}], got {v!r}")
+        if self.sim_samples == 0 and not self.real:
+            raise ValueError("nothing to train on: sim_samples is 0 and no real data is given")
+
+    def to_json(self) -> dict:
+        d = dataclasses.asdict(self)
+        d["real_exclude"] = list(self.real_exclude) if self.real_exclude else None
+        return d
+
+
+@dataclass
+class TrainResult:
+    """What a run produced."""
+
+    model: object  # models.nets.PoseNet
+    spec: GraphSpec
+    history: list[dict]
+    best_epoch: int
+    minutes: float
+    val: dict
+    calibration: list[GraphBatch]
+
+
+# -- data ------------------------------------------------------------------------------------------
+
+
+def prepare(samples: list[Sample], site: Site, spec: GraphSpec, model, chunk: int = 2048) -> tuple[NDArray, NDArray, NDArray]:
+    """Graphs and targets of samples seen in one site.
+
+    Returns:
+        x (S, N, F) float32, mask (S, N) float32, targets (S, 4) float32.
+    """
+    xs, ms = [], []
+    for i in range(0, len(samples), chunk):
+        b = build_batch([s.views for s in samples[i : i + chunk]], site, spec)
+        xs.append(b.x)
+        ms.append(b.mask)
+    truth = np.array([s.truth for s in samples]).reshape(-1, 3)
+    N, F = spec.num_nodes, spec.num_features
+    return (np.concatenate(xs) if xs else np.zeros((0, N, F), np.float32),
+            np.concatenate(ms) if ms else np.zeros((0, N), np.float32),
+            model.targets(truth, site))
+
+
+def _datasets(cfg: TrainConfig, site: Site, spec: GraphSpec, model, progress: bool) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """Training arrays and a per-sample weight of 'real' (1) or simulated (0)."""
+    from models.simdata import SimDataConfig, generate, random_site
+
+    parts: list[tuple[NDArray, NDArray, NDArray, NDArray]] = []
+    if cfg.sim_samples:
+        if cfg.random_sites:
+            rng = np.random.default_rng([cfg.sim_seed, 0x517E])
+            per = max(1, cfg.sim_samples // cfg.random_sites)
+            for k in tqdm(range(cfg.random_sites), desc="random sites", unit="site", disable=not progress):
+                rs = random_site(np.random.default_rng(rng.integers(0, 2**63)), name=f"random{k}")
+                samples = generate(rs, SimDataConfig(samples=per, seed=cfg.sim_seed * 100_003 + k, depth=cfg.use_3d), progress=False)
+                x, m, y = prepare(samples, rs, spec, model)
+                parts.append((x, m, y, np.zeros(len(x), np.float32)))
+        else:
+            samples = generate(site, SimDataConfig(samples=cfg.sim_samples, seed=cfg.sim_seed, depth=cfg.use_3d), progress=progress)
+            x, m, y = prepare(samples, site, spec, model)
+            parts.append((x, m, y, np.zeros(len(x), np.float32)))
+    if cfg.real:
+        from models.wtf import load_wtf, truth_to_torso
+
+        real = load_wtf(cfg.real, site=site if cfg.use_3d else None)
+        if cfg.real_exclude:
+            a, b = cfg.real_exclude
+            real = real[:a] + real[b:]
+        real = [Sample(s.views, truth_to_torso(s.truth)[0], s.stamp_ns) for s in real]
+        x, m, y = prepare(real, site, spec, model)
+        parts.append((np.repeat(x, cfg.real_repeat, 0), np.repeat(m, cfg.real_repeat, 0), np.repeat(y, cfg.real_repeat, 0),
+                      np.ones(len(x) * cfg.real_repeat, np.float32)))
+    return tuple(np.concatenate([p[i] for p in parts]) for i in range(4))  # type: ignore[return-value]
+
+
+# -- training ---------------------------------------------------------------------------------------
+
+
+def _metrics(out: NDArray, y: NDArray, scale: float) -> dict:
+    pos = np.abs(out[:, :2] - y[:, :2]) * scale  # (S, 2) metres
+    yaw = np.abs(wrap_angle(np.arctan2(out[:, 2], out[:, 3]) - np.arctan2(y[:, 2], y[:, 3])))
+    return {"mae_x_m": float(pos[:, 0].mean()), "mae_y_m": float(pos[:, 1].mean()), "yaw_mae_deg": float(np.degrees(np.mean(yaw)))}
+
+
+def train(cfg: TrainConfig, progress: bool = True) -> TrainResult:
+    """Train a model as ``cfg`` says; returns it with its history (no files written)."""
+    import torch
+
+    from models.nets import build_model
+
+    torch.manual_seed(cfg.seed)
+    torch.set_num_threads(cfg.threads)
+    rng = np.random.default_rng(cfg.seed)
+    site = load_site(cfg.site)
+    spec = GraphSpec.for_site(site, variant=cfg.variant, use_3d=cfg.use_3d, max_views=cfg.max_views)  # type: ignore[arg-type]
+    hparams = {**ARCH_DEFAULTS[cfg.arch], **cfg.hparams}
+    if cfg.variant == "site":
+        hparams["origin"] = tuple(float(v) for v in floor_centre(site))
+    model = build_model(cfg.arch, spec, **hparams)  # type: ignore[arg-type]
+    if cfg.init:
+        state = torch.load(cfg.init, map_location="cpu", weights_only=False)
+        model.load_state_dict(state["state_dict"])
+        log.info("starting from %s", cfg.init)
+    t0 = time.monotonic()
+    X, M, Y, R = _datasets(cfg, site, spec, model, progress)
+    log.info("training data: %d graphs (%d real), %d nodes x %d features, built in %.1f s",
+             len(X), int(R.sum()), spec.num_nodes, spec.num_features, time.monotonic() - t0)
+    order = rng.permutation(len(X))
+    n_val = int(round(cfg.val_fraction * len(X)))
+    val, tr = order[:n_val], order[n_val:]
+    T = torch.from_numpy(np.array(adjacency_template(spec)))  # (R, N, N), a writable copy
+    Xt, Mt, Yt = torch.from_numpy(X), torch.from_numpy(M), torch.from_numpy(Y)
+    w = torch.tensor([1.0, 1.0, cfg.yaw_weight, cfg.yaw_weight])
+
+    def forward(idx: NDArray) -> tuple[torch.Tensor, torch.Tensor]:
+        ii = torch.from_numpy(idx)
+        m = Mt[ii]  # (B, N)
+        adj = T[None] * m[:, None, :, None] * m[:, None, None, :]  # (B, R, N, N)
+        return model(Xt[ii], adj, m), Yt[ii]
+
+    opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    steps_per_epoch = max(1, math.ceil(len(tr) / cfg.batch_size))
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=cfg.lr, total_steps=cfg.epochs * steps_per_epoch, pct_start=0.1)
+    best = (math.inf, -1, None)
+    history: list[dict] = []
+    stale = 0
+    for epoch in range(cfg.epochs):
+        model.train()
+        perm = rng.permutation(tr)
+        total = 0.0
+        bar = tqdm(range(steps_per_epoch), desc=f"epoch {epoch + 1}/{cfg.epochs}", unit="step", leave=False, disable=not progress)
+        for s in bar:
+            out, y = forward(perm[s * cfg.batch_size : (s + 1) * cfg.batch_size])
+            loss = (((out - y) ** 2) * w).mean()
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            sched.step()
+            total += loss.item()
+            if s % 20 == 0:
+                bar.set_postfix(loss=f"{total / (s + 1):.4f}")
+        val_out, val_y = _predict(model, forward, val, cfg.batch_size)
+        val_loss = float(((((val_out - val_y) ** 2) * w.numpy()).mean())) if len(val) else total / steps_per_epoch
+        row = {"epoch": epoch + 1, "train_loss": total / steps_per_epoch, "val_loss": val_loss, "minutes": (time.monotonic() - t0) / 60,
+               **(_metrics(val_out, val_y, model.scale) if len(val) else {})}
+        history.append(row)
+        log.info("epoch %d: train %.4f val %.4f | val MAE x %.0f mm y %.0f mm yaw %.1f deg | %.1f min", epoch + 1, row["train_loss"], val_loss,
+                 1000 * row.get("mae_x_m", math.nan), 1000 * row.get("mae_y_m", math.nan), row.get("yaw_mae_deg", math.nan), row["minutes"])
+        if val_loss < best[0]:
+            best, stale = (val_loss, epoch + 1, {k: v.detach().clone() for k, v in model.state_dict().items()}), 0
+        else:
+            stale += 1
+        if stale >= cfg.patience:
+            log.info("early stop: no better validation loss for %d epochs", stale)
+            break
+        if (time.monotonic() - t0) / 60 > cfg.max_minutes:
+            log.info("time limit of %.1f min reached", cfg.max_minutes)
+            break
+    model.load_state_dict(best[2])
+    model.eval()
+    val_out, val_y = _predict(model, forward, val, cfg.batch_size)
+    calib_idx = rng.choice(tr, size=min(512, len(tr)), replace=False)
+    calibration = [GraphBatch(x=X[calib_idx[i : i + 128]], adj=(adjacency_template(spec)[None] * M[calib_idx[i : i + 128], None, :, None]
+                                                                * M[calib_idx[i : i + 128], None, None, :]).astype(np.float32),
+                              mask=M[calib_idx[i : i + 128]]) for i in range(0, len(calib_idx), 128)]
+    return TrainResult(model=model, spec=spec, history=history, best_epoch=best[1], minutes=(time.monotonic() - t0) / 60,
+                       val=_metrics(val_out, val_y, model.scale) if len(val) else {}, calibration=calibration)
+
+
+def _predict(model, forward, idx: NDArray, batch: int) -> tuple[NDArray, NDArray]:
+    import torch
+
+    model.eval()
+    outs, ys = [], []
+    with torch.no_grad():
+        for i in range(0, len(idx), batch * 4):
+            o, y = forward(idx[i : i + batch * 4])
+            outs.append(o.numpy())
+            ys.append(y.numpy())
+    model.train()
+    if not outs:
+        return np.zeros((0, 4), np.float32), np.zeros((0, 4), np.float32)
+    return np.concatenate(outs), np.concatenate(ys)
+
+
+def save(result: TrainResult, cfg: TrainConfig, out_dir: str | Path, name: str, quantize: bool = True) -> dict[str, Path]:
+    """Write <name>.pt (state and config), <name>.fp32.onnx, <name>.int8.onnx and <name>.train.json."""
+    import torch
+
+    from models.export import export_onnx, quantize_int8
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"checkpoint": out / f"{name}.pt", "fp32": out / f"{name}.fp32.onnx", "report": out / f"{name}.train.json"}
+    config = {**cfg.to_json(), "best_epoch": result.best_epoch, "minutes": round(result.minutes, 2), "val": result.val}
+    torch.save({"state_dict": result.model.state_dict(), "config": config, "model": result.model.config()}, paths["checkpoint"])
+    export_onnx(result.model, result.spec, config, paths["fp32"])
+    if quantize:
+        paths["int8"] = out / f"{name}.int8.onnx"
+        quantize_int8(paths["fp32"], paths["int8"], result.calibration)
+    paths["report"].write_text(json.dumps({"config": config, "history": result.history}, indent=1) + "\n")
+    return paths
+
+
+# -- command line ---------------------------------------------------------------------------------
+
+
+def _range(text: str) -> tuple[int, int]:
+    try:
+        a, b = (int(v) for v in text.split(":"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--real-exclude must be START:END sample indices, got {text!r}") from None
+    if not 0 <= a < b:
+        raise argparse.ArgumentTypeError(f"--real-exclude needs 0 <= START < END, got {text!r}")
+    return a, b
+
+
+def add_train_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--site", required=True, help="site file (TOML)")
+    p.add_argument("--arch", default="gat", choices=sorted(ARCH_DEFAULTS), help="network (default gat)")
+    p.add_argument("--variant", default="site", choices=("site", "rays"), help="features: site cameras one-hot, or world rays (site-independent)")
+    p.add_argument("--3d", dest="use_3d", action="store_true", help="add the joints' 3D positions (depth cameras)")
+    p.add_argument("--max-views", type=int, default=4, help="rays variant: view slots per person (default 4)")
+    p.add_argument("--hparams", type=json.loads, default={}, help='architecture hyper-parameters as JSON, e.g. \'{"hidden": 64}\'')
+    p.add_argument("--sim-samples", type=int, default=30_000, help="simulated samples (default 30000)")
+    p.add_argument("--sim-seed", type=int, default=0, help="simulation seed")
+    p.add_argument("--random-sites", type=int, default=0, help="rays variant: simulate in this many random rooms instead of the site")
+    p.add_argument("--real", help="a WheresTheFellow JSON file to mix in (DS1-like)")
+    p.add_argument("--real-exclude", type=_range, help="hold out real samples START:END")
+    p.add_argument("--real-repeat", type=int, default=20, help="times each real sample is seen per epoch (default 20)")
+    p.add_argument("--epochs", type=int, default=40)
+    p.add_argument("--batch-size", type=int, default=128)
+    p.add_argument("--lr", type=float, default=2e-3)
+    p.add_argument("--patience", type=int, default=6, help="early stopping patience, epochs")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--max-minutes", type=float, default=15.0, help="stop training after this long (default 15)")
+    p.add_argument("--threads", type=int, default=2, help="torch threads (default 2)")
+    p.add_argument("--init", help="start from this checkpoint (.pt): fine-tuning")
+
+
+def config_from_args(args: argparse.Namespace) -> TrainConfig:
+    return TrainConfig(
+        site=args.site, arch=args.arch, variant=args.variant, use_3d=args.use_3d, max_views=args.max_views, hparams=args.hparams,
+        sim_samples=args.sim_samples, sim_seed=args.sim_seed, random_sites=args.random_sites, real=args.real,
+        real_exclude=args.real_exclude, real_repeat=args.real_repeat, epochs=args.epochs, batch_size=args.batch_size,
+        lr=args.lr, patience=args.patience, seed=args.seed, max_minutes=args.max_minutes, threads=args.threads, init=args.init,
+    )
+
+
+def _search(cfg: TrainConfig, n: int, progress: bool) -> TrainConfig:
+    """The paper's small random hyper-parameter search: ``n`` short runs, keep the best by validation loss."""
+    rng = np.random.default_rng(cfg.seed + 1)
+    space = {
+        "gat": lambda: {"hidden": int(rng.choice([32, 48, 64])), "heads": int(rng.choice([2, 4])), "layers": int(rng.integers(2, 5))},
+        "rgcn": lambda: {"hidden": int(rng.choice([32, 48, 64])), "bases": int(rng.choice([2, 4, 8])), "layers": int(rng.integers(2, 5))},
+        "mlp": lambda: {"hidden": int(rng.choice([64, 128, 256])), "slot_dim": int(rng.choice([32, 64, 128]))},
+    }[cfg.arch]
+    trials = []
+    for k in range(n):
+        hp = space()
+        lr = float(10 ** rng.uniform(-3.3, -2.3))
+        short = dataclasses.replace(cfg, hparams=hp, lr=lr, sim_samples=min(cfg.sim_samples, 8000), epochs=min(cfg.epochs, 6),
+                                    max_minutes=cfg.max_minutes / (n + 1))
+        r = train(short, progress=progress)
+        loss = min(h["val_loss"] for h in r.history)
+        trials.append((loss, hp, lr))
+        log.info("search %d/%d: %s lr %.2g -> val loss %.4f", k + 1, n, hp, lr, loss)
+    loss, hp, lr = min(trials, key=lambda t: t[0])
+    log.info("search: best %s lr %.2g (val loss %.4f)", hp, lr, loss)
+    return dataclasses.replace(cfg, hparams=hp, lr=lr)
+
+
+def _run(args: argparse.Namespace) -> int:
+    try:
+        cfg = config_from_args(args)
+        load_site(cfg.site)
+        if cfg.real and not Path(cfg.real).is_file():
+            raise ValueError(f"--real {cfg.real}: no such file")
+        if cfg.init and not Path(cfg.init).is_file():
+            raise ValueError(f"--init {cfg.init}: no such file")
+    except (ValueError, SiteError) as e:
+        print(f"superbody train: error: {e}", file=sys.stderr)
+        return 2
+    progress = sys.stderr.isatty() and not args.no_progress
+    if args.search:
+        cfg = _search(cfg, args.search, progress)
+    result = train(cfg, progress=progress)
+    paths = save(result, cfg, args.out, args.name, quantize=not args.no_int8)
+    print(f"trained {cfg.arch} ({cfg.variant}{', 3D' if cfg.use_3d else ''}) in {result.minutes:.1f} min, best epoch {result.best_epoch}: "
+          f"validation MAE x {1000 * result.val.get('mae_x_m', math.nan):.0f} mm, y {1000 * result.val.get('mae_y_m', math.nan):.0f} mm, "
+          f"yaw {result.val.get('yaw_mae_deg', math.nan):.1f} deg")
+    for kind, p in paths.items():
+        print(f"  {kind}: {p} ({p.stat().st_size / 1e6:.2f} MB)")
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("train", help="train a pose network from a site (simulation) and optional real data; export ONNX fp32 + int8")
+    add_train_args(p)
+    p.add_argument("--search", type=int, default=0, help="random hyper-parameter search: this many short trials first")
+    p.add_argument("--out", default="build/models", help="output folder (default build/models)")
+    p.add_argument("--name", default="model", help="file name stem (default model)")
+    p.add_argument("--no-int8", action="store_true", help="skip int8 quantisation")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(func=_run)

@@ -1,0 +1,74 @@
+"""The offline pipeline end to end, through the command line: simulate -> train -> export ->
+quantise -> evaluate on the real dev.json; and a tiny blocked cross-validation."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import onnx
+import pytest
+
+from tests.conftest import ROOT, WTF_SITE
+
+
+def _cli(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "edge.cli", *args], cwd=ROOT, capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    out = tmp_path_factory.mktemp("models")
+    r = _cli("train", "--site", str(WTF_SITE), "--arch", "gat", "--sim-samples", "800", "--epochs", "2", "--hparams",
+             '{"hidden": 16, "heads": 2, "layers": 2}', "--out", str(out), "--name", "tiny", "--no-progress")
+    assert r.returncode == 0, r.stderr[-2000:]
+    return out
+
+
+def test_train_writes_checkpoint_fp32_int8_and_report(tiny):
+    for name in ("tiny.pt", "tiny.fp32.onnx", "tiny.int8.onnx", "tiny.train.json"):
+        assert (tiny / name).stat().st_size > 0
+    meta = {p.key: p.value for p in onnx.load(str(tiny / "tiny.int8.onnx")).metadata_props}
+    config = json.loads(meta["train.config"])
+    assert config["arch"] == "gat" and config["sim_samples"] == 800 and config["site"] == str(WTF_SITE)
+    report = json.loads((tiny / "tiny.train.json").read_text())
+    assert len(report["history"]) == 2
+
+
+def test_eval_on_dev_json(tiny, dev_json, tmp_path):
+    out = tmp_path / "eval.json"
+    r = _cli("eval", "--dataset", str(dev_json), "--model", str(tiny / "tiny.int8.onnx"), "--json-out", str(out),
+             "--predictions-out", str(tmp_path / "pred.csv"))
+    assert r.returncode == 0, r.stderr[-2000:]
+    doc = json.loads(out.read_text())
+    assert doc["samples"] == 225 and set(doc["by_cameras"]) == {"1", "2", "3"}
+    assert doc["position_mae_mm"]["x"] > 0 and doc["baseline"]["samples"] == 225
+    assert len((tmp_path / "pred.csv").read_text().splitlines()) == 226
+
+
+def test_crossval_predicts_every_sample_from_a_model_that_never_saw_it(dev_json, tmp_path):
+    out = tmp_path / "cv.json"
+    r = _cli("crossval", "--site", str(WTF_SITE), "--real", str(dev_json), "--folds", "3", "--arch", "mlp",
+             "--sim-samples", "300", "--epochs", "1", "--real-repeat", "2", "--json-out", str(out))
+    assert r.returncode == 0, r.stderr[-2000:]
+    doc = json.loads(out.read_text())
+    assert [f["held_out"] for f in doc["folds"]] == [[0, 75], [75, 150], [150, 225]]
+    assert doc["model"]["samples"] == 225 and doc["model"]["failed"] == 0
+    assert doc["analytic"]["samples"] == 225
+
+
+# (arguments, text the one-line error must contain)
+BAD = [
+    (["train", "--site", "nope.toml"], "cannot read site file"),
+    (["train", "--site", str(WTF_SITE), "--arch", "transformer"], "invalid choice"),
+    (["train", "--site", str(WTF_SITE), "--sim-samples", "0"], "nothing to train on"),
+    (["train", "--site", str(WTF_SITE), "--random-sites", "3"], "random_sites needs variant 'rays'"),
+    (["crossval", "--site", str(WTF_SITE)], "needs the real data"),
+]
+
+
+@pytest.mark.parametrize("args,message", BAD)
+def test_bad_arguments(args, message):
+    r = _cli(*args, timeout=60)
+    assert r.returncode == 2 and message in r.stderr, r.stderr[-1000:]
