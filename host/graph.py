@@ -51,7 +51,7 @@ from typing import Final, Literal, Mapping, Sequence, get_args
 import numpy as np
 from numpy.typing import NDArray
 
-from edge.body import KEYPOINTS, MIRROR, NUM_KEYPOINTS, PARENT
+from edge.body import KEYPOINTS, MIRROR, NUM_KEYPOINTS, PARENT, TYPICAL_HEIGHT_M
 from edge.camera import pixel_to_ray
 from edge.observation import PersonView
 from edge.site import Site
@@ -111,6 +111,11 @@ METADATA_VERSION: Final[str] = "1"
 _META_PREFIX: Final[str] = "graph."
 
 
+# Floor positions in the "geometry" features are in units of this many metres (as the outputs).
+GEOMETRY_SCALE_M: Final[float] = 4.0
+_JOINT_HEIGHTS: Final = np.asarray(TYPICAL_HEIGHT_M)
+
+
 def floor_centre(site: Site) -> NDArray[np.float64]:
     """Centre of the bounding box of the site's floor polygon, (x, y) metres, shape (2,).
 
@@ -130,12 +135,17 @@ class GraphSpec:
         use_3d: add the joints' 3D positions (depth cameras) as features.
         camera_ids: "site" variant: the cameras, in slot / one-hot order. Empty for "rays".
         max_views: "rays" variant: the number of view slots. Ignored for "site".
+        geometry: beyond the paper, add per node where its camera ray meets the joint's
+            typical height (edge.body.TYPICAL_HEIGHT_M): a single-view floor position (x, y),
+            floor-centred, in units of ``GEOMETRY_SCALE_M`` (body nodes: mean of their joints).
+            Still RGB-only; it spares the network learning each camera's projection.
     """
 
     variant: Variant = "site"
     use_3d: bool = False
     camera_ids: tuple[str, ...] = ()
     max_views: int = 4
+    geometry: bool = False
 
     def __post_init__(self) -> None:
         if self.variant not in VARIANTS:
@@ -152,12 +162,12 @@ class GraphSpec:
             raise ValueError(f"GraphSpec.max_views must be an integer in [1, 64], got {self.max_views!r}")
 
     @classmethod
-    def for_site(cls, site: Site, variant: Variant = "site", use_3d: bool = False, max_views: int = 4) -> GraphSpec:
+    def for_site(cls, site: Site, variant: Variant = "site", use_3d: bool = False, max_views: int = 4, geometry: bool = False) -> GraphSpec:
         """The spec of a model for this site: its cameras in site order ("site"), or none ("rays")."""
         if variant not in VARIANTS:
             raise ValueError(f"variant must be one of {', '.join(VARIANTS)}, got {variant!r}")
         cams = site.camera_ids if variant == "site" else ()
-        return cls(variant=variant, use_3d=use_3d, camera_ids=cams, max_views=max_views)
+        return cls(variant=variant, use_3d=use_3d, camera_ids=cams, max_views=max_views, geometry=geometry)
 
     @property
     def num_slots(self) -> int:
@@ -183,6 +193,8 @@ class GraphSpec:
         names += ["u", "v", "score"]
         if self.use_3d:
             names += ["x3d", "y3d", "z3d"]
+        if self.geometry:
+            names += ["floor_x", "floor_y"]
         return tuple(names)
 
     @property
@@ -201,6 +213,9 @@ class GraphSpec:
             groups["ray"], groups["ray_origin"] = slice(t, t + 3), slice(t + 3, t + 6)
         if self.use_3d:
             groups["xyz"] = slice(t + extra + 3, t + extra + 6)
+        if self.geometry:
+            end = t + extra + 3 + (3 if self.use_3d else 0)
+            groups["floor"] = slice(end, end + 2)
         if group not in groups:
             raise ValueError(f"feature group {group!r} is not in this spec; groups: {', '.join(groups)}")
         return groups[group]
@@ -214,6 +229,7 @@ class GraphSpec:
             f"{_META_PREFIX}use_3d": "true" if self.use_3d else "false",
             f"{_META_PREFIX}camera_ids": json.dumps(list(self.camera_ids)),
             f"{_META_PREFIX}max_views": str(self.max_views),
+            f"{_META_PREFIX}geometry": "true" if self.geometry else "false",
             f"{_META_PREFIX}num_nodes": str(self.num_nodes),
             f"{_META_PREFIX}num_features": str(self.num_features),
             f"{_META_PREFIX}num_relations": str(self.num_relations),
@@ -240,7 +256,11 @@ class GraphSpec:
             raise ValueError(f"model metadata {_META_PREFIX}camera_ids / max_views unreadable: {e}") from None
         if not isinstance(cams, list):
             raise ValueError(f"model metadata {_META_PREFIX}camera_ids must be a JSON list, got {cams!r}")
-        spec = cls(variant=get("variant"), use_3d=use_3d == "true", camera_ids=tuple(cams), max_views=max_views)  # type: ignore[arg-type]
+        geometry = meta.get(f"{_META_PREFIX}geometry", "false")  # absent in models made before the option
+        if geometry not in ("true", "false"):
+            raise ValueError(f"model metadata {_META_PREFIX}geometry must be 'true' or 'false', got {geometry!r}")
+        spec = cls(variant=get("variant"), use_3d=use_3d == "true", camera_ids=tuple(cams), max_views=max_views,  # type: ignore[arg-type]
+                   geometry=geometry == "true")
         for key, value in (("num_nodes", spec.num_nodes), ("num_features", spec.num_features), ("num_relations", spec.num_relations)):
             if get(key) != str(value):
                 raise ValueError(f"model metadata {_META_PREFIX}{key} is {get(key)}, but the spec implies {value}")
@@ -319,7 +339,8 @@ def _static(spec: GraphSpec) -> _Static:
     r, dst, src = np.nonzero(A)
     for arr in (A, x, r, dst, src):
         arr.setflags(write=False)
-    groups = ("type", "uv", "score") + (("camera",) if spec.variant == "site" else ("ray", "ray_origin")) + (("xyz",) if spec.use_3d else ())
+    groups = (("type", "uv", "score") + (("camera",) if spec.variant == "site" else ("ray", "ray_origin"))
+              + (("xyz",) if spec.use_3d else ()) + (("floor",) if spec.geometry else ()))
     return _Static(
         template=A, edge_flat=np.ravel_multi_index((r, dst, src), A.shape), edge_dst=dst, edge_src=src,
         node_x=x, slot_of={c: k for k, c in enumerate(spec.camera_ids)},
@@ -426,7 +447,7 @@ def build_batch(view_sets: Sequence[Mapping[str, PersonView]], site: Site, spec:
     feats[:, :, st.cols["score"]] = score[:, :, None]
     if spec.use_3d:
         p3 = np.stack(pts).astype(np.float64) if V else np.zeros((0, J, 3))  # (V, 17, 3) camera frame
-    if spec.variant == "rays":
+    if spec.variant == "rays" or spec.geometry:
         origin = np.array([*floor_centre(site), 0.0])  # (3,)
         rays = np.zeros((V, SLOT_SIZE, 3))  # (V, 18, 3)
         centres = np.zeros((V, 3))  # (V, 3)
@@ -439,10 +460,22 @@ def build_batch(view_sets: Sequence[Mapping[str, PersonView]], site: Site, spec:
             r[sub] = d
             rays[sel] = r
             centres[sel] = cam.t - origin
-            if spec.use_3d:
+            if spec.use_3d and spec.variant == "rays":
                 p3[sel] = p3[sel] @ cam.R.T + (cam.t - origin)  # world frame, floor-centred
+    if spec.variant == "rays":
         feats[:, :, st.cols["ray"]] = rays
         feats[:, :, st.cols["ray_origin"]] = centres[:, None]
+    if spec.geometry:
+        # Where each joint's ray meets its typical height: camera centre + s * ray, z = h_j.
+        dz = rays[:, 1:, 2]  # (V, 17)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = (_JOINT_HEIGHTS[None] - (centres[:, 2:3] + origin[2])) / dz  # (V, 17)
+            ok = vis & np.isfinite(s) & (s > 0) & (s < 30)  # (V, 17) in front of the camera, within 30 m
+            floor = np.where(ok[:, :, None], centres[:, None, :2] + s[:, :, None] * rays[:, 1:, :2], 0.0) / GEOMETRY_SCALE_M  # (V, 17, 2)
+        geo = np.zeros((V, SLOT_SIZE, 2))  # (V, 18, 2) body node: mean of its joints
+        geo[:, 0] = floor.sum(axis=1) / np.maximum(ok.sum(axis=1), 1)[:, None]
+        geo[:, 1:] = floor
+        feats[:, :, st.cols["floor"]] = geo
     if spec.use_3d:
         has3 = np.isfinite(p3).all(axis=2) & vis  # (V, 17)
         p3 = np.where(has3[:, :, None], p3, 0.0)  # (V, 17, 3)

@@ -57,6 +57,7 @@ class TrainConfig:
     variant: str = "site"
     use_3d: bool = False
     max_views: int = 4
+    geometry: bool = False
     hparams: dict = field(default_factory=dict)
     sim_samples: int = 30_000
     sim_seed: int = 0
@@ -187,7 +188,7 @@ def train(cfg: TrainConfig, progress: bool = True) -> TrainResult:
     torch.set_num_threads(cfg.threads)
     rng = np.random.default_rng(cfg.seed)
     site = load_site(cfg.site)
-    spec = GraphSpec.for_site(site, variant=cfg.variant, use_3d=cfg.use_3d, max_views=cfg.max_views)  # type: ignore[arg-type]
+    spec = GraphSpec.for_site(site, variant=cfg.variant, use_3d=cfg.use_3d, max_views=cfg.max_views, geometry=cfg.geometry)  # type: ignore[arg-type]
     hparams = {**ARCH_DEFAULTS[cfg.arch], **cfg.hparams}
     if cfg.variant == "site":
         hparams["origin"] = tuple(float(v) for v in floor_centre(site))
@@ -316,6 +317,7 @@ def add_train_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--variant", default="site", choices=("site", "rays"), help="features: site cameras one-hot, or world rays (site-independent)")
     p.add_argument("--3d", dest="use_3d", action="store_true", help="add the joints' 3D positions (depth cameras)")
     p.add_argument("--max-views", type=int, default=4, help="rays variant: view slots per person (default 4)")
+    p.add_argument("--geometry", action="store_true", help="add each joint's single-view floor position (beyond the paper)")
     p.add_argument("--hparams", type=json.loads, default={}, help='architecture hyper-parameters as JSON, e.g. \'{"hidden": 64}\'')
     p.add_argument("--sim-samples", type=int, default=30_000, help="simulated samples (default 30000)")
     p.add_argument("--sim-seed", type=int, default=0, help="simulation seed")
@@ -335,7 +337,7 @@ def add_train_args(p: argparse.ArgumentParser) -> None:
 
 def config_from_args(args: argparse.Namespace) -> TrainConfig:
     return TrainConfig(
-        site=args.site, arch=args.arch, variant=args.variant, use_3d=args.use_3d, max_views=args.max_views, hparams=args.hparams,
+        site=args.site, arch=args.arch, variant=args.variant, use_3d=args.use_3d, max_views=args.max_views, geometry=args.geometry, hparams=args.hparams,
         sim_samples=args.sim_samples, sim_seed=args.sim_seed, random_sites=args.random_sites, real=args.real,
         real_exclude=args.real_exclude, real_repeat=args.real_repeat, epochs=args.epochs, batch_size=args.batch_size,
         lr=args.lr, patience=args.patience, seed=args.seed, max_minutes=args.max_minutes, threads=args.threads, init=args.init,
