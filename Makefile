@@ -5,7 +5,7 @@ PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: demo test bench clean
+.PHONY: demo test bench models clean
 
 # Runtime install (no torch): what the demo and a deployed host need.
 $(VENV)/.run-installed: pyproject.toml
@@ -28,7 +28,12 @@ test: $(VENV)/.dev-installed
 	$(PY) -m pytest -q $(ARGS)
 
 bench: $(VENV)/.dev-installed
-	$(PY) benchmarks/run_all.py
+	$(PY) benchmarks/model_bench.py
+	$(PY) benchmarks/host_bench.py --zenoh
+
+# Retrain the shipped models and rewrite models/MODEL_CARD.md (~45 min on 2 cores; needs dev.json).
+models: $(VENV)/.dev-installed
+	scripts/train_models.sh
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis

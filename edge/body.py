@@ -80,24 +80,26 @@ MIRROR_PAIRS: Final[tuple[tuple[int, int], ...]] = tuple(
     (i, j) for i, j in enumerate(MIRROR) if i < j
 )
 
-# Height of each joint above the floor for a 1.75 m adult standing upright, in metres.
-# Used to place single-view joints in 3D and by the simulator's skeleton.
+# Height above the floor of each joint as a pose detector places it, for a standing adult of
+# about 1.75 m with the arms down, in metres: the medians of the depth-measured joints in the
+# WheresTheFellow recordings (OpenPifPaf keypoints; docs/dataset.md), arms from the unraised
+# side. Used to place single-view joints in 3D and by the simulator's skeleton.
 TYPICAL_HEIGHT_M: Final[tuple[float, ...]] = (
-    1.62,  # 0 nose
-    1.66,  # 1 left_eye
-    1.66,  # 2 right_eye
-    1.63,  # 3 left_ear
-    1.63,  # 4 right_ear
-    1.44,  # 5 left_shoulder
-    1.44,  # 6 right_shoulder
+    1.59,  # 0 nose
+    1.62,  # 1 left_eye
+    1.62,  # 2 right_eye
+    1.62,  # 3 left_ear
+    1.62,  # 4 right_ear
+    1.43,  # 5 left_shoulder
+    1.43,  # 6 right_shoulder
     1.12,  # 7 left_elbow
     1.12,  # 8 right_elbow
-    0.86,  # 9 left_wrist
-    0.86,  # 10 right_wrist
-    0.93,  # 11 left_hip
-    0.93,  # 12 right_hip
+    0.89,  # 9 left_wrist
+    0.89,  # 10 right_wrist
+    0.91,  # 11 left_hip
+    0.91,  # 12 right_hip
     0.50,  # 13 left_knee
     0.50,  # 14 right_knee
-    0.08,  # 15 left_ankle
-    0.08,  # 16 right_ankle
+    0.12,  # 15 left_ankle
+    0.12,  # 16 right_ankle
 )

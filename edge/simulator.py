@@ -112,13 +112,16 @@ class NoiseModel:
 
 @dataclass(frozen=True)
 class Appearance:
-    """A person's body and clothing. Colours are OpenCV HSV (hue 0-179, sat/val 0-255)."""
+    """A person's body, clothing and what they carry. Colours are OpenCV HSV (hue 0-179,
+    sat/val 0-255). ``carry`` (left, right): that forearm is held up in front of the chest
+    (a phone, a cup, a tracker) instead of swinging, as the right arm in the real recordings."""
 
     height_m: float
     width_scale: float
     shirt_hsv: tuple[int, int, int]
     trousers_hsv: tuple[int, int, int]
     skin_hsv: tuple[int, int, int]
+    carry: tuple[bool, bool] = (False, False)
 
 
 @dataclass(frozen=True)
@@ -146,7 +149,8 @@ class PersonState:
     joints: NDArray[np.float64]
 
 
-def skeleton(x: float, y: float, yaw: float, phase: float, walk: float, height_m: float = 1.75, width_scale: float = 1.0) -> NDArray[np.float64]:
+def skeleton(x: float, y: float, yaw: float, phase: float, walk: float, height_m: float = 1.75, width_scale: float = 1.0,
+             carry: tuple[bool, bool] = (False, False)) -> NDArray[np.float64]:
     """3D COCO-17 joints of a person standing or walking.
 
     Args:
@@ -155,6 +159,7 @@ def skeleton(x: float, y: float, yaw: float, phase: float, walk: float, height_m
         walk: 0 standing still .. 1 walking at full stride.
         height_m: body height; all lengths scale with it.
         width_scale: lateral scale (build).
+        carry: (left, right) forearm held up in front of the chest.
 
     Returns:
         Joints, shape (17, 3), world frame.
@@ -168,18 +173,21 @@ def skeleton(x: float, y: float, yaw: float, phase: float, walk: float, height_m
     forward = _FORWARD * s
     j = base + lateral[:, None] * l + forward[:, None] * f + (_HEIGHT * s)[:, None] * z  # (17, 3)
     leg_amp, arm_amp = 0.38 * walk, 0.32 * walk
-    thigh, shin, upper, fore = 0.43 * s, 0.42 * s, 0.31 * s, 0.27 * s
-    for side, (hip, knee, ankle, sh, elb, wri) in ((0.0, (11, 13, 15, 5, 7, 9)), (math.pi, (12, 14, 16, 6, 8, 10))):
+    leg = (_HEIGHT[11] - _HEIGHT[15]) * s  # hip to ankle
+    thigh, shin, upper, fore = 0.52 * leg, 0.48 * leg, 0.31 * s, 0.27 * s
+    for side, held, (hip, knee, ankle, sh, elb, wri) in ((0.0, carry[0], (11, 13, 15, 5, 7, 9)), (math.pi, carry[1], (12, 14, 16, 6, 8, 10))):
         theta = leg_amp * math.sin(phase + side)  # leg swing, forward positive
         bend = walk * 0.5 * max(0.0, math.cos(phase + side))  # knee flexes in the swing phase
         j[knee] = j[hip] + thigh * (math.sin(theta) * f - math.cos(theta) * z)
         j[ankle] = j[knee] + shin * (math.sin(theta - bend) * f - math.cos(theta - bend) * z)
         alpha = -arm_amp * math.sin(phase + side)  # arms swing against the legs
         beta = 0.15 + 0.35 * walk * max(0.0, math.sin(-(phase + side)))  # elbow flex
+        if held:  # upper arm a little forward, forearm raised: the wrist at chest height
+            alpha, beta = 0.35 + 0.05 * math.sin(phase), 1.8
         j[elb] = j[sh] + upper * (math.sin(alpha) * f - math.cos(alpha) * z) + 0.02 * s * l * (1 if side == 0 else -1)
         j[wri] = j[elb] + fore * (math.sin(alpha + beta) * f - math.cos(alpha + beta) * z)
     # The stance foot carries the body: keep the lowest ankle at its standing height.
-    j[:, 2] += 0.08 * s - min(j[15, 2], j[16, 2])
+    j[:, 2] += _HEIGHT[15] * s - min(j[15, 2], j[16, 2])
     return j
 
 
@@ -388,7 +396,7 @@ class SimPerson:
             seg = self._plan.segments[0]
             yaw = seg[3] if seg[1] in ("stand", "turn") else seg[4]
             x, y = float(self._plan.last[0]), float(self._plan.last[1])
-            return PersonState(x, y, float(wrap_angle(yaw)), skeleton(x, y, yaw, 0.0, 0.0, a.height_m, a.width_scale))
+            return PersonState(x, y, float(wrap_angle(yaw)), skeleton(x, y, yaw, 0.0, 0.0, a.height_m, a.width_scale, a.carry))
         i = max(bisect.bisect_right(self._plan.starts, tau) - 1, 0)
         seg = self._plan.segments[i]
         u = min(max((tau - self._plan.starts[i]) / seg[0], 0.0), 1.0) if seg[0] > 0 else 1.0
@@ -409,7 +417,7 @@ class SimPerson:
             _, _, p0, yaw = seg
             x, y, walk, phase = float(p0[0]), float(p0[1]), 0.0, 0.0
             yaw = float(wrap_angle(yaw + 0.05 * math.sin(0.7 * tau)))  # a little sway
-        joints = skeleton(x, y, yaw, phase, walk, a.height_m, a.width_scale)
+        joints = skeleton(x, y, yaw, phase, walk, a.height_m, a.width_scale, a.carry)
         return PersonState(x, y, float(wrap_angle(yaw)), joints)
 
 
@@ -613,6 +621,7 @@ def _random_appearance(rng: np.random.Generator, height_m: float) -> Appearance:
         shirt_hsv=(int(rng.integers(0, 180)), int(rng.integers(90, 240)), int(rng.integers(90, 230))),
         trousers_hsv=(int(rng.integers(0, 180)), int(rng.integers(20, 200)), int(rng.integers(40, 180))),
         skin_hsv=(int(rng.integers(5, 20)), int(rng.integers(60, 150)), int(rng.integers(90, 220))),
+        carry=(bool(rng.uniform() < 0.15), bool(rng.uniform() < 0.3)),
     )
 
 
@@ -626,7 +635,7 @@ def _recolour(a: Appearance, hue: int, rng: np.random.Generator) -> Appearance:
     trousers_hue = (hue + int(rng.integers(30, 150))) % 180
     return Appearance(
         a.height_m, a.width_scale, (hue, int(rng.integers(140, 240)), a.shirt_hsv[2]),
-        (trousers_hue, a.trousers_hsv[1], a.trousers_hsv[2]), a.skin_hsv,
+        (trousers_hue, a.trousers_hsv[1], a.trousers_hsv[2]), a.skin_hsv, a.carry,
     )
 
 

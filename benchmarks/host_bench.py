@@ -1,0 +1,224 @@
+"""Host speed: observation -> pose latency and the highest sustained observation rate, one core.
+
+    python benchmarks/host_bench.py [--model models/site-independent.int8.onnx] [--seconds 6]
+                                    [--zenoh] [--json-out F]
+
+For 3, 6 and 10 cameras x 1, 5 and 10 people: a ring of cameras (30 fps) around an 8 x 6 m
+room, simulated people, every camera's observations encoded beforehand. Then, with this
+process pinned to one core:
+
+- processing: the host's real path (decode and validate, tracker, set S, graph building, one
+  batched ONNX call for the people whose views changed, filter, PoseArray encoding) driven by a
+  queue simulation on measured costs: observations arrive at their real rate (30 fps per
+  camera), the host drains what has arrived, steps and publishes. Latency = publication -
+  arrival (p50/p99). The highest sustained rate: the arrival rate is raised until the backlog
+  grows (p99 over 100 ms).
+- with ``--zenoh``: the host as its own process pinned to one core, a feeder process publishing
+  the observations over loopback Zenoh at their capture times (30 fps per camera), and the
+  latency from each observation's capture to the arrival of the PoseArray it first appears in.
+
+The estimator is the site-independent model (it serves any number of cameras); per-person cost
+does not depend on its weights. Without it, the analytic estimator is used and said so.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+
+from edge import transport, wire  # noqa: E402
+from edge.camera import Camera, look_at_rotation  # noqa: E402
+from edge.simulator import SimCamera, World  # noqa: E402
+from edge.site import Site, dump_site  # noqa: E402
+from host import pose as pose_msg  # noqa: E402
+from host.aggregator import Aggregator  # noqa: E402
+from host.cli import build_estimator  # noqa: E402
+
+FPS = 30.0
+
+
+def ring_site(n: int) -> Site:
+    """``n`` 720p cameras on the walls of an 8 x 6 m room, 2.6 m up, looking at its centre."""
+    w, d = 8.0, 6.0
+    cams = []
+    for i in range(n):
+        a = 2 * math.pi * i / n
+        v = np.array([math.cos(a), math.sin(a)])
+        s = min((w / 2 - 0.1) / max(abs(v[0]), 1e-9), (d / 2 - 0.1) / max(abs(v[1]), 1e-9))
+        pos = np.array([w / 2 + s * v[0], d / 2 + s * v[1], 2.6])
+        R = look_at_rotation(pos, np.array([w / 2, d / 2, 0.9]))
+        cams.append(Camera(id=f"c{i}", width=1280, height=720, fps=FPS, fx=800.0, fy=800.0, cx=640.0, cy=360.0,
+                           position=tuple(map(float, pos)), rotation=tuple(tuple(map(float, r)) for r in R)))
+    return Site(name=f"ring{n}", cameras=tuple(cams), floor=((0.0, 0.0), (w, 0.0), (w, d), (0.0, d)))
+
+
+def frames(site: Site, people: int, seconds: float, t0_ns: int) -> list[tuple[int, str, bytes]]:
+    """(capture ns, camera, payload) of every camera's frames, in capture order."""
+    world = World(site, people, seed=5)
+    cams = [SimCamera(world, c.id) for c in site.cameras]
+    out = []
+    for k in range(int(seconds * FPS)):
+        for i, cam in enumerate(cams):
+            stamp = t0_ns + int((k + i / len(cams)) * 1e9 / FPS)
+            out.append((stamp, cam.camera.id, wire.encode(cam.observe(stamp)[0])))
+    return out
+
+
+def processing(site: Site, estimator, name: str, data: list, speed: float) -> dict:
+    """The host loop on measured costs, observations arriving at ``speed`` x their real rate.
+
+    A queue simulation on this core: observations arrive at (capture - first capture) / speed;
+    the host drains every observation that has arrived (decode and validate, tracker), then
+    steps (set S, graphs, one ONNX call, filter) and encodes the PoseArray; each step's cost is
+    measured with perf_counter and advances the clock. Latency = publication - arrival.
+    """
+    agg = Aggregator(site, estimator, name)
+    keys = {c.id: transport.observation_key(site.name, c.id) for c in site.cameras}
+    arrive = (np.array([s for s, _, _ in data]) - data[0][0]) / 1e9 / speed
+    now, i, lat, people, batches = 0.0, 0, np.zeros(len(data)), [], 0
+    while i < len(data):
+        now = max(now, arrive[i])
+        j = int(np.searchsorted(arrive, now, side="right"))
+        t = time.perf_counter()
+        for stamp, cam, payload in data[i:j]:
+            agg.ingest(payload, keys[cam], stamp)
+        arr = agg.step(data[j - 1][0])
+        pose_msg.encode(arr)
+        now += time.perf_counter() - t
+        lat[i:j] = now - arrive[i:j]
+        people.append(len(arr.people))
+        batches += 1
+        i = j
+    warm = lat[len(lat) // 3 :] * 1e3  # after the tracker's first seconds of confirming people
+    return {"p50_ms": float(np.percentile(warm, 50)), "p99_ms": float(np.percentile(warm, 99)),
+            "obs_per_step": len(data) / batches, "people_tracked": int(np.median(people[len(people) // 3 :])),
+            "backlog_s": float(lat[-1]), "rejected": dict(agg.rejected)}
+
+
+def sustained(site: Site, estimator, name: str, data: list, offered: float) -> float:
+    """The highest observation rate (obs/s) at which the backlog stays bounded (p99 < 100 ms)."""
+    best = 0.0
+    for speed in (1, 1.5, 2, 3, 4, 6, 8, 12, 16, 24, 32):
+        r = processing(site, estimator, name, data, speed)
+        if r["p99_ms"] > 100 or r["backlog_s"] > 0.1:
+            break
+        best = offered * speed
+    return best
+
+
+def _feeder(port: int, data_path: str, site_name: str) -> None:
+    """Publishes the pre-encoded observations at their capture times (a separate process)."""
+    import pickle
+
+    import zenoh
+
+    data = pickle.loads(Path(data_path).read_bytes())
+    with zenoh.open(transport.session_config("peer", connect=[f"tcp/127.0.0.1:{port}"])) as s:
+        pubs = {}
+        for stamp, cam, payload in data:
+            pub = pubs.get(cam) or pubs.setdefault(cam, s.declare_publisher(transport.observation_key(site_name, cam)))
+            delay = (stamp - time.time_ns()) / 1e9
+            if delay > 0:
+                time.sleep(delay)
+            pub.put(payload)
+
+
+def over_zenoh(site: Site, model: str | None, people: int, seconds: float) -> dict:
+    """Host process on one core, feeder process, loopback Zenoh: capture -> PoseArray arrival."""
+    import pickle
+
+    import zenoh
+
+    from tests.conftest import free_port
+
+    port = free_port()
+    tmp = Path(tempfile.mkdtemp(prefix="host-bench-"))
+    (tmp / "site.toml").write_text(dump_site(site))
+    t0 = time.time_ns() + int(4e9) + int(people * len(site.cameras) * seconds * 3e6)  # after generation and start-up
+    data = frames(site, people, seconds, t0)
+    (tmp / "data.pkl").write_bytes(pickle.dumps(data))
+    arrivals: list[tuple[int, pose_msg.PoseArray]] = []
+    conf = transport.session_config("peer", connect=[], listen=[f"tcp/127.0.0.1:{port}"])
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    core = min(os.sched_getaffinity(0))
+    host_args = [sys.executable, "-m", "edge.cli", "host", "run", "--site", str(tmp / "site.toml"), "--connect", f"tcp/127.0.0.1:{port}",
+                 *(["--model", model] if model else ["--estimator", "analytic"])]
+    with zenoh.open(conf) as session:
+        sub = session.declare_subscriber(transport.people_key(site.name), lambda s: arrivals.append((time.time_ns(), pose_msg.decode(s.payload.to_bytes()))))
+        host = subprocess.Popen(host_args, env=env, stderr=subprocess.DEVNULL, preexec_fn=lambda: os.sched_setaffinity(0, {core}))
+        feeder = subprocess.Popen([sys.executable, "-c", f"import sys; sys.path.insert(0, {str(ROOT)!r}); "
+                                   f"from benchmarks.host_bench import _feeder; _feeder({port}, {str(tmp / 'data.pkl')!r}, {site.name!r})"],
+                                  env=env, preexec_fn=lambda: os.sched_setaffinity(0, set(os.sched_getaffinity(0)) - {core} or {core}))
+        feeder.wait(timeout=seconds + 120)
+        time.sleep(0.5)
+        host.terminate()
+        host.wait(timeout=20)
+        sub.undeclare()
+    # Latency of an observation = arrival of the first PoseArray whose newest view is at least as new.
+    stamps = np.array(sorted(s for s, _, _ in data if s > t0 + 2.5e9))
+    arr_t = np.array([a for a, p in arrivals if p.people])
+    arr_s = np.array([max(q.stamp_ns for q in p.people) for _, p in arrivals if p.people])
+    if len(arr_s) == 0:
+        return {"e2e_p50_ms": math.nan, "e2e_p99_ms": math.nan}
+    order = np.argsort(arr_s)
+    best = np.minimum.accumulate(arr_t[order][::-1])[::-1]  # earliest arrival among arrays at least this new
+    idx = np.searchsorted(arr_s[order], stamps)
+    ok = idx < len(order)
+    lat = (best[idx[ok]] - stamps[ok]) / 1e6
+    return {"e2e_p50_ms": float(np.percentile(lat, 50)), "e2e_p99_ms": float(np.percentile(lat, 99)), "observations": int(ok.sum())}
+
+
+def main(model: str | None, seconds: float, use_zenoh: bool, json_out: str | None) -> int:
+    os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})  # one core for the in-process measurement
+    if model and not Path(model).is_file():
+        print(f"no model at {model}: using the analytic estimator", file=sys.stderr)
+        model = None
+    results = {}
+    print(f"estimator: {Path(model).name if model else 'analytic'}; {FPS:.0f} fps per camera; one core")
+    header = f"{'cameras':>7} {'people':>6} {'obs/s':>6} {'p50 ms':>7} {'p99 ms':>7} {'obs/step':>8} {'tracked':>7} {'max sustained obs/s':>19}"
+    if use_zenoh:
+        header += f" {'e2e p50':>8} {'e2e p99':>8}"
+    print(header)
+    for n in (3, 6, 10):
+        site = ring_site(n)
+        estimator, name = build_estimator(site, "onnx" if model else "analytic", model)
+        for people in (1, 5, 10):
+            data = frames(site, people, seconds, 1_700_000_000 * 10**9)
+            r = processing(site, estimator, name, data, 1.0)
+            r["max_sustained_obs_per_s"] = sustained(site, estimator, name, data, n * FPS)
+            if use_zenoh:
+                os.sched_setaffinity(0, set(range(os.cpu_count() or 1)))
+                r.update(over_zenoh(site, model, people, seconds))
+                os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+            results[f"{n}x{people}"] = r
+            line = (f"{n:>7} {people:>6} {n * FPS:>6.0f} {r['p50_ms']:>7.2f} {r['p99_ms']:>7.2f} {r['obs_per_step']:>8.2f} "
+                    f"{r['people_tracked']:>7} {r['max_sustained_obs_per_s']:>19.0f}")
+            if use_zenoh:
+                line += f" {r['e2e_p50_ms']:>8.2f} {r['e2e_p99_ms']:>8.2f}"
+            print(line, flush=True)
+    if json_out:
+        Path(json_out).write_text(json.dumps(results, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--model", default=str(ROOT / "models" / "site-independent.int8.onnx"), help="a rays-variant model")
+    p.add_argument("--seconds", type=float, default=6.0, help="simulated seconds per configuration")
+    p.add_argument("--zenoh", action="store_true", help="also measure end to end over loopback Zenoh, host in its own process")
+    p.add_argument("--json-out")
+    a = p.parse_args()
+    sys.exit(main(a.model, a.seconds, a.zenoh, a.json_out))
