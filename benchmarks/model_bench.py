@@ -19,7 +19,6 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-import numpy as np  # noqa: E402
 import onnxruntime as ort  # noqa: E402
 
 from edge.site import load_site  # noqa: E402

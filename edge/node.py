@@ -20,7 +20,8 @@ import time
 from typing import Protocol
 
 from edge import transport, wire
-from edge.clock import WorldClock
+from edge.cli import int_in, positive
+from edge.clock import WorldClock, add_clock_args, clock_from_args
 from edge.observation import Observation
 from edge.site import Site, SiteError, load_site
 
@@ -116,7 +117,7 @@ def _run(args: argparse.Namespace) -> int:
         site = load_site(args.site)
         site.camera(args.camera)
         source = make_source(args.source, site, args.camera, seed=args.seed, people=args.people, depth=args.depth)
-        clock = WorldClock(args.clock_anchor_ns, args.clock_scale)
+        clock = clock_from_args(args)
         conf = transport.config_from_args(args)
     except (SiteError, KeyError, ValueError) as e:
         print(f"superbody edge run: error: {e.args[0] if e.args else e}", file=sys.stderr)
@@ -128,20 +129,6 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _people(text: str) -> int:
-    n = int(text)
-    if not 0 <= n <= 64:
-        raise argparse.ArgumentTypeError(f"--people must be in [0, 64], got {n}")
-    return n
-
-
-def _positive(text: str) -> float:
-    v = float(text)
-    if not (v > 0 and math.isfinite(v)):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
-    return v
-
-
 def register(sub: argparse._SubParsersAction) -> None:
     edge = sub.add_parser("edge", help="camera-node commands")
     edge_sub = edge.add_subparsers(dest="edge_command", metavar="COMMAND", required=True)
@@ -150,10 +137,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--camera", required=True, help="camera id in the site file")
     p.add_argument("--source", default="sim", choices=SOURCES, help="frame source (default: sim)")
     p.add_argument("--seed", type=int, default=0, help="simulator seed: nodes with the same seed see the same people")
-    p.add_argument("--people", type=_people, default=3, help="simulated people (default 3)")
+    p.add_argument("--people", type=int_in(0, 64, "--people"), default=3, help="simulated people (default 3)")
     p.add_argument("--depth", action="store_true", help="simulate a depth camera (3D joints in the Observations)")
-    p.add_argument("--duration", type=_positive, default=None, help="stop after this many seconds of world time")
-    p.add_argument("--clock-scale", type=_positive, default=1.0, help="world seconds per wall second (simulation speed-up)")
-    p.add_argument("--clock-anchor-ns", type=int, default=0, help="wall time (UNIX ns) at which world and wall clocks agree")
+    p.add_argument("--duration", type=positive, default=None, help="stop after this many seconds of world time")
+    add_clock_args(p)
     transport.add_session_args(p)
     p.set_defaults(func=_run)

@@ -11,6 +11,7 @@ Keys (everything under ``superbody/<site>/``):
 - ``superbody/<site>/cameras/<camera>/alive``: the camera node's liveliness token.
 - ``superbody/<site>/people``: the host's PoseArray.
 - ``superbody/<site>/host/alive``: the host's liveliness token.
+- ``superbody/<site>/host/status``: the host's periodic status (JSON, see host/aggregator.py).
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ __all__ = [
     "camera_alive_key",
     "people_key",
     "host_alive_key",
+    "host_status_key",
     "camera_from_key",
 ]
 
@@ -69,6 +71,11 @@ def people_key(site: str) -> str:
 def host_alive_key(site: str) -> str:
     _checked(site)
     return f"superbody/{site}/host/alive"
+
+
+def host_status_key(site: str) -> str:
+    _checked(site)
+    return f"superbody/{site}/host/status"
 
 
 def camera_from_key(key: str) -> str | None:

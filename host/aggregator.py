@@ -8,13 +8,17 @@ Two layers:
   the PoseArray. Bad payloads are counted by reason and dropped, never fatal.
 - ``run_host()``: the process around it: a Zenoh subscriber whose callback only queues the raw
   payload (heavy work stays off Zenoh's thread), a loop that drains the queue and publishes
-  after each batch, camera liveliness, a periodic one-line status.
+  after each batch, camera liveliness, a periodic one-line status, also published as JSON on
+  ``superbody/<site>/host/status``: ``{"cameras_alive": [ids], "cameras_total": n,
+  "people": n, "obs_per_s": f, "latency_ms": {"p50": f, "p99": f}, "rejected": {reason: n},
+  "queue_dropped": n, "published": n}``.
 
 ``superbody host run --site SITE.toml [--model M.onnx | --estimator analytic]``.
 """
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import threading
@@ -246,6 +250,7 @@ def run_host(
         token = session.liveliness().declare_token(transport.host_alive_key(site.name))
         pub = session.declare_publisher(transport.people_key(site.name), encoding=pose_msg.zenoh_encoding())
         live = session.liveliness().declare_subscriber(transport.camera_alive_key(site.name), on_alive, history=True)
+        status_pub = session.declare_publisher(transport.host_status_key(site.name), encoding=zenoh.Encoding.APPLICATION_JSON)
         sub = session.declare_subscriber(transport.observation_key(site.name), on_sample)
         log.info("host for site %s: %d cameras, estimator %s, publishing on %s", site.name, len(site.cameras),
                  aggregator.estimator_name, transport.people_key(site.name))
@@ -286,12 +291,19 @@ def run_host(
             last_pub = time.monotonic()
             if last_pub - last_status >= cfg.status_every_s:
                 p50, p99 = _percentiles(latencies)
+                status = {
+                    "cameras_alive": sorted(aggregator.cameras_alive), "cameras_total": len(site.cameras), "people": len(arr.people),
+                    "obs_per_s": obs_since_status / (last_pub - last_status), "latency_ms": {"p50": p50, "p99": p99},
+                    "rejected": dict(aggregator.rejected), "queue_dropped": counters["queue_dropped"], "published": counters["published"],
+                }
+                status_pub.put(json.dumps(status))
                 rej = ", ".join(f"{k} {v}" for k, v in sorted(aggregator.rejected.items())) or "none"
                 log.info("cameras alive %d/%d (%s) | people %d | obs/s %.0f | latency p50 %.2f ms p99 %.2f ms | rejected: %s | queue dropped %d",
-                         len(aggregator.cameras_alive), len(site.cameras), ",".join(sorted(aggregator.cameras_alive)) or "-",
-                         len(arr.people), obs_since_status / (last_pub - last_status), p50, p99, rej, counters["queue_dropped"])
+                         len(aggregator.cameras_alive), len(site.cameras), ",".join(status["cameras_alive"]) or "-",
+                         len(arr.people), status["obs_per_s"], p50, p99, rej, counters["queue_dropped"])
                 last_status, obs_since_status = last_pub, 0
         sub.undeclare()
+        status_pub.undeclare()
         live.undeclare()
         pub.undeclare()
         token.undeclare()

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import math
 import signal
 import sys
 import threading
@@ -12,7 +11,8 @@ from dataclasses import replace
 from pathlib import Path
 
 from edge import transport
-from edge.clock import WorldClock
+from edge.cli import positive
+from edge.clock import add_clock_args, clock_from_args
 from edge.site import Site, SiteError, load_site
 
 __all__ = ["register", "build_estimator", "default_model"]
@@ -56,13 +56,6 @@ def build_estimator(site: Site, kind: str = "onnx", model: str | Path | None = N
     return OnnxEstimator(path, site), f"onnx:{path.name}"
 
 
-def _positive(text: str) -> float:
-    v = float(text)
-    if not (v > 0 and math.isfinite(v)):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
-    return v
-
-
 def _unit(text: str) -> float:
     v = float(text)
     if not 0 < v <= 1:
@@ -84,7 +77,7 @@ def _run_host(args: argparse.Namespace) -> int:
             tracker=replace(TrackerConfig(), d_max=args.d_max, use_geometry=not args.no_geometry),
             filter=replace(FilterConfig(), enabled=not args.no_filter),
         )
-        clock = WorldClock(args.clock_anchor_ns, args.clock_scale)
+        clock = clock_from_args(args)
         conf = transport.config_from_args(args)
         serial = None
         if args.serial:
@@ -110,17 +103,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--site", required=True, help="site file (TOML)")
     p.add_argument("--estimator", choices=ESTIMATORS, default="onnx", help="pose estimator (default: onnx)")
     p.add_argument("--model", help="ONNX model (default: the shipped models/<site>.int8.onnx)")
-    p.add_argument("--freshness", type=_positive, default=0.5, help="seconds a camera's view stays in set S (default 0.5)")
+    p.add_argument("--freshness", type=positive, default=0.5, help="seconds a camera's view stays in set S (default 0.5)")
     p.add_argument("--d-max", type=_unit, default=0.65, help="colour match threshold, Bhattacharyya distance (default 0.65)")
     p.add_argument("--no-geometry", action="store_true", help="match on colour only, as the paper (no ground-point gate)")
     p.add_argument("--no-filter", action="store_true", help="per-frame output: no temporal filtering")
     p.add_argument("--max-rate", type=float, default=0.0, help="publish at most this many times a second (default: after every batch)")
-    p.add_argument("--status-every", type=_positive, default=10.0, help="seconds between status lines (default 10)")
+    p.add_argument("--status-every", type=positive, default=10.0, help="seconds between status lines (default 10)")
     p.add_argument("--serial", metavar="URL", help="also write poses to this serial port (pyserial URL, e.g. /dev/ttyUSB0)")
     p.add_argument("--baud", type=int, default=115200, help="serial baud rate (default 115200)")
-    p.add_argument("--duration", type=_positive, default=None, help="stop after this many seconds")
-    p.add_argument("--clock-scale", type=_positive, default=1.0, help="world seconds per wall second (simulation speed-up)")
-    p.add_argument("--clock-anchor-ns", type=int, default=0, help="wall time (UNIX ns) at which world and wall clocks agree")
+    p.add_argument("--duration", type=positive, default=None, help="stop after this many seconds")
+    add_clock_args(p)
     transport.add_session_args(p)
     p.set_defaults(func=_run_host)
 

@@ -24,7 +24,6 @@ import sys
 import tempfile
 import threading
 import time
-from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -32,6 +31,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from edge import transport, wire
+from edge.cli import int_in, positive
 from edge.clock import WorldClock
 from edge.angles import wrap_angle
 from edge.simulator import SimCamera, World
@@ -319,32 +319,18 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _people(text: str) -> int:
-    n = int(text)
-    if not 1 <= n <= 10:
-        raise argparse.ArgumentTypeError(f"--people must be in [1, 10], got {n}")
-    return n
-
-
-def _positive(text: str) -> float:
-    v = float(text)
-    if not (v > 0 and math.isfinite(v)):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
-    return v
-
-
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("demo", help="run the whole system on simulated cameras and people, with a live table")
     p.add_argument("--site", default=str(DEFAULT_SITE), help="site file (default: the paper's apartment)")
-    p.add_argument("--people", type=_people, default=3, help="simulated people (default 3)")
+    p.add_argument("--people", type=int_in(1, 10, "--people"), default=3, help="simulated people (default 3)")
     p.add_argument("--seed", type=int, default=7, help="simulator seed (default 7)")
-    p.add_argument("--duration", type=_positive, default=None, help="stop after this many simulated seconds (default: Ctrl-C)")
-    p.add_argument("--clock-scale", type=_positive, default=1.0, help="simulated seconds per wall second (default 1)")
+    p.add_argument("--duration", type=positive, default=None, help="stop after this many simulated seconds (default: Ctrl-C)")
+    p.add_argument("--clock-scale", type=positive, default=1.0, help="simulated seconds per wall second (default 1)")
     p.add_argument("--port", type=int, default=7447, help="loopback port of the demo's Zenoh router (default 7447)")
     p.add_argument("--estimator", choices=("onnx", "analytic"), default="onnx", help="pose estimator (default: the shipped int8 model)")
     p.add_argument("--model", help="ONNX model (default: models/<site>.int8.onnx)")
     p.add_argument("--kill-camera", metavar="ID", help="kill this camera's process mid-run (fault injection)")
-    p.add_argument("--kill-at", type=_positive, default=10.0, help="simulated second at which to kill it (default 10)")
+    p.add_argument("--kill-at", type=positive, default=10.0, help="simulated second at which to kill it (default 10)")
     p.add_argument("--no-table", action="store_true", help="no live table, only the summary")
     p.add_argument("--json-summary", metavar="F", help="write the summary as JSON")
     p.set_defaults(func=_run)

@@ -23,18 +23,8 @@ from models.calibrate import (
     normalised_dlt,
     reprojection_errors,
 )
-from models.wtf import RawSample, load_wtf_raw
 
-REPO = Path(__file__).resolve().parents[2]
-DEV_JSON = REPO / ".." / "shared" / "datasets" / "wheresthefellow" / "dev.json"
-SITE_TOML = REPO / "deploy" / "sites" / "wtf-apartment.toml"
-
-
-@pytest.fixture(scope="module")
-def raw() -> list[RawSample]:
-    if not DEV_JSON.is_file():
-        pytest.fail(f"dev.json not found at {DEV_JSON.resolve()}: the shared datasets folder must sit beside the repo")
-    return load_wtf_raw(DEV_JSON)
+from tests.conftest import DEV_JSON, WTF_SITE as SITE_TOML
 
 
 def _camera(position, target, fx=617.0, fy=617.0, cx=320.0, cy=240.0, width=640, height=480) -> Camera:

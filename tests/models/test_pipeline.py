@@ -72,3 +72,13 @@ BAD = [
 def test_bad_arguments(args, message):
     r = _cli(*args, timeout=60)
     assert r.returncode == 2 and message in r.stderr, r.stderr[-1000:]
+
+
+def test_random_search_picks_a_configuration_and_trains_it(tmp_path):
+    r = _cli("train", "--site", str(WTF_SITE), "--arch", "mlp", "--search", "2", "--sim-samples", "300", "--epochs", "1",
+             "--out", str(tmp_path), "--name", "searched", "--no-int8", "--no-progress")
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stderr.count("search 1/2") == 1 and "search: best" in r.stderr
+    config = json.loads((tmp_path / "searched.train.json").read_text())["config"]
+    assert set(config["hparams"]) == {"hidden", "slot_dim"}
+    assert not (tmp_path / "searched.int8.onnx").exists()

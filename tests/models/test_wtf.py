@@ -5,7 +5,6 @@ from __future__ import annotations
 import copy
 import json
 import math
-from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
@@ -31,16 +30,7 @@ from models.wtf import (
     wtf_to_world,
 )
 
-REPO = Path(__file__).resolve().parents[2]
-DEV_JSON = REPO / ".." / "shared" / "datasets" / "wheresthefellow" / "dev.json"
-SITE_TOML = REPO / "deploy" / "sites" / "wtf-apartment.toml"
-
-
-@pytest.fixture(scope="module")
-def raw() -> list[RawSample]:
-    if not DEV_JSON.is_file():
-        pytest.fail(f"dev.json not found at {DEV_JSON.resolve()}: the shared datasets folder must sit beside the repo")
-    return load_wtf_raw(DEV_JSON)
+from tests.conftest import DEV_JSON, WTF_SITE as SITE_TOML
 
 
 def _forward(left: np.ndarray, right: np.ndarray) -> np.ndarray:

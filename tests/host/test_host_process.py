@@ -1,0 +1,95 @@
+"""The host as a separate process over real Zenoh on loopback, with simulated camera processes."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+
+import pytest
+import zenoh
+
+from edge import transport, wire
+from edge.simulator import SimCamera, World
+from edge.site import load_site
+from host import pose as pose_msg
+from host.demo import DemoConfig, run_demo
+from tests.conftest import WTF_SITE, free_port
+
+SITE = str(WTF_SITE)
+
+
+@pytest.mark.slow
+def test_three_people_sixty_seconds_and_a_camera_killed():
+    """3 cameras, 3 people in distinct clothing, 60 simulated seconds at 3x; camera 3 dies at 30 s."""
+    summary = run_demo(DemoConfig(site=SITE, people=3, seed=7, duration_s=60, clock_scale=3.0, port=free_port(),
+                                  kill_camera="3", kill_at_s=30, table=False, estimator="analytic"))
+    assert summary["people_confirmed"] == 3, summary
+    assert summary["tracks"] == 3, summary  # exactly three people, never a fourth
+    assert all(d <= 3.0 for d in summary["confirm_delay_s"].values()), summary
+    assert summary["id_switches"] == 0, summary
+    assert summary["position_mae_mm"] < 150 and summary["yaw_mae_deg"] < 15, summary
+    # After camera 3 died the host kept publishing from the other two and reported it gone.
+    assert summary["pose_arrays_after_kill"] > 100, summary
+    assert summary["cameras_alive_at_end"] == ["1", "2"], summary
+    assert summary["host_reported_camera_gone"], summary
+
+
+class _Watch:
+    def __init__(self, session, site: str):
+        self.arrays: list[pose_msg.PoseArray] = []
+        self.status: list[dict] = []
+        self.cv = threading.Condition()
+        self.subs = [session.declare_subscriber(transport.people_key(site), self._people),
+                     session.declare_subscriber(transport.host_status_key(site), self._status)]
+
+    def _people(self, sample):
+        with self.cv:
+            self.arrays.append(pose_msg.decode(sample.payload.to_bytes()))
+            self.cv.notify_all()
+
+    def _status(self, sample):
+        with self.cv:
+            self.status.append(json.loads(sample.payload.to_bytes()))
+            self.cv.notify_all()
+
+    def wait(self, predicate, timeout: float) -> bool:
+        with self.cv:
+            return self.cv.wait_for(predicate, timeout=timeout)
+
+
+def test_malformed_payloads_are_counted_and_the_host_keeps_publishing(processes):
+    port = free_port()
+    site = load_site(SITE)
+    conf = transport.session_config("peer", connect=[], listen=[f"tcp/127.0.0.1:{port}"])
+    with zenoh.open(conf) as session:
+        watch = _Watch(session, site.name)
+        processes.start("host", "run", "--site", SITE, "--estimator", "analytic", "--status-every", "0.5",
+                        "--connect", f"tcp/127.0.0.1:{port}")
+        for cam in site.camera_ids:
+            processes.start("edge", "run", "--site", SITE, "--camera", cam, "--seed", "3", "--people", "2",
+                            "--connect", f"tcp/127.0.0.1:{port}")
+        assert watch.wait(lambda: any(s["cameras_alive"] == ["1", "2", "3"] for s in watch.status), timeout=30)
+        good = json.loads(wire.encode(SimCamera(World(site, 1, seed=0), "1").observe(time.time_ns())[0]))
+        bad = {
+            "not_json": b"{{{",
+            "not_utf8": b"\xc3\x28",
+            "version": json.dumps({**good, "version": 7}).encode(),
+            "range": json.dumps({**good, "image": [640, 10**6]}).encode(),
+            "unknown_camera": json.dumps({**good, "camera": "42"}).encode(),
+        }
+        for _ in range(20):  # bounded: 100 bad payloads
+            for reason, payload in bad.items():
+                cam = "42" if reason == "unknown_camera" else "1"
+                session.put(transport.observation_key(site.name, cam), payload)
+        time.sleep(0.2)
+        n_before = len(watch.arrays)
+
+        def all_counted() -> bool:
+            return bool(watch.status) and all(watch.status[-1]["rejected"].get(r, 0) >= 20 for r in bad)
+
+        assert watch.wait(all_counted, timeout=20), watch.status[-1] if watch.status else None
+        # Still publishing people from the real cameras afterwards.
+        assert watch.wait(lambda: len(watch.arrays) > n_before + 20 and watch.arrays[-1].people, timeout=20)
+        for s in watch.subs:
+            s.undeclare()
