@@ -140,7 +140,6 @@ class _Watcher:
             if not arr.people:
                 s.rows = []
                 return
-            states = self.world.states(arr.stamp_ns * 1e-9)
             # Match each pose to the true person nearest at the pose's capture time.
             truth = np.array([[st.x, st.y] for st in self.world.states(arr.people[0].stamp_ns * 1e-9)])
             poses = np.array([[p.x, p.y] for p in arr.people])
@@ -164,7 +163,6 @@ class _Watcher:
                     s.switches += 1
                 s.track_of[k] = p.id
                 s.rows.append((p, k, e_pos, e_yaw))
-            del states
 
     def table(self, elapsed_s: float) -> str:
         with self.lock:
