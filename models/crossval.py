@@ -99,7 +99,7 @@ def _run(args: argparse.Namespace) -> int:
     except (ValueError, SiteError) as e:
         print(f"superbody crossval: error: {e}", file=sys.stderr)
         return 2
-    out = crossvalidate(cfg, args.folds, args.truth_offset, progress=sys.stderr.isatty())
+    out = crossvalidate(cfg, args.folds, args.truth_offset, progress=sys.stderr.isatty() and not args.no_progress)
     print(f"blocked {args.folds}-fold cross-validation on {cfg.real} ({cfg.arch}, {cfg.variant}{', 3D' if cfg.use_3d else ''}):")
     print(format_table(out["reports"], out["truth_offset_m"]))
     if args.json_out:

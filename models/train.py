@@ -333,6 +333,7 @@ def add_train_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-minutes", type=float, default=15.0, help="stop training after this long (default 15)")
     p.add_argument("--threads", type=int, default=2, help="torch threads (default 2)")
     p.add_argument("--init", help="start from this checkpoint (.pt): fine-tuning")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
 def config_from_args(args: argparse.Namespace) -> TrainConfig:
@@ -398,5 +399,4 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", default="build/models", help="output folder (default build/models)")
     p.add_argument("--name", default="model", help="file name stem (default model)")
     p.add_argument("--no-int8", action="store_true", help="skip int8 quantisation")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=_run)
