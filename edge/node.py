@@ -79,7 +79,7 @@ def run_node(
     period_ns = 1e9 / cam.fps
     # Cameras are not synchronised: spread their capture instants over the frame period.
     phase_ns = period_ns * site.camera_index(camera_id) / max(len(site.cameras), 1)
-    published = skipped = people = 0
+    published = skipped = people = rejected = 0
     with zenoh.open(conf) as session:
         token = session.liveliness().declare_token(transport.camera_alive_key(site.name, camera_id))
         pub = session.declare_publisher(transport.observation_key(site.name, camera_id), encoding=wire.zenoh_encoding())
@@ -94,7 +94,15 @@ def run_node(
                 break
             clock.sleep_until(t_ns)
             obs = source.observe(t_ns)
-            pub.put(wire.encode(obs))
+            try:
+                payload = wire.encode(obs)
+            except ValueError as e:  # a source produced something no subscriber would accept
+                rejected += 1
+                if rejected <= 3 or rejected % 1000 == 0:
+                    log.error("camera %s: frame %d not published (%d so far): %s", camera_id, obs.seq, rejected, e)
+                k += 1
+                continue
+            pub.put(payload)
             published += 1
             people += len(obs.people)
             # If we fell behind (slow machine), skip to the next frame in the future.

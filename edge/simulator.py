@@ -549,7 +549,8 @@ def render_views(
         score = rng.normal(noise.score_mean + 0.5 * quality, noise.score_std, size=body.NUM_KEYPOINTS)
         # Pixel noise grows with the person's apparent size (closer = bigger errors in pixels).
         sigma = noise.pixel_noise_px * 3.0 / np.maximum(z, 0.5)
-        uv_noisy = uv + rng.normal(size=uv.shape) * sigma[:, None]
+        # Detectors report keypoints inside the image.
+        uv_noisy = np.clip(uv + rng.normal(size=uv.shape) * sigma[:, None], 0.0, [cam.width - 1, cam.height - 1])
         kp = np.full((body.NUM_KEYPOINTS, 3), np.nan, dtype=np.float32)
         kp[visible, :2] = uv_noisy[visible]
         kp[visible, 2] = np.clip(score[visible], noise.score_threshold, 1.0)
@@ -669,8 +670,9 @@ def _bbox(kp: NDArray, cam: Camera) -> NDArray[np.float32]:
     v = kp[~np.isnan(kp[:, 0]), :2]
     lo, hi = v.min(0), v.max(0)
     pad = 0.1 * (hi - lo) + 8.0
-    lo = np.maximum(lo - pad, 0.0)
-    hi = np.minimum(hi + pad, [cam.width - 1, cam.height - 1])
+    size = np.array([cam.width - 1, cam.height - 1], dtype=np.float64)
+    lo = np.clip(lo - pad, 0.0, size)
+    hi = np.clip(hi + pad, lo, size)
     return np.array([lo[0], lo[1], hi[0], hi[1]], dtype=np.float32)
 
 

@@ -137,3 +137,28 @@ def test_missing_site_file(processes, tmp_path):
     p = processes.start("edge", "run", "--site", str(tmp_path / "none.toml"), "--camera", "1")
     _, err = p.communicate(timeout=30)
     assert p.returncode == 2 and "cannot read site file" in err
+
+
+def test_a_frame_that_cannot_be_encoded_is_skipped_not_fatal(listener):
+    """A source that produces an invalid observation: the node logs it, skips it and goes on."""
+    import numpy as np
+
+    from edge.node import run_node
+    from edge.observation import Observation, PersonView
+
+    site = load_site(SITE)
+    good = SimCamera(World(site, 1, seed=0), "nw")
+    bad_view = PersonView(np.full((17, 3), np.nan, np.float32), np.array([5, 5, 1, 1], np.float32), np.zeros((16, 8), np.float32))
+
+    class EveryOtherBad:
+        def observe(self, stamp_ns):
+            obs = good.observe(stamp_ns)[0]
+            if (stamp_ns // (10**9 // 15)) % 2:
+                return Observation(obs.site, obs.camera, obs.seq, obs.stamp_ns, obs.width, obs.height, (bad_view,))
+            return obs
+
+    conf = transport.session_config("peer", connect=[f"tcp/127.0.0.1:{listener.port}"])
+    published = run_node(conf, site, "nw", EveryOtherBad(), duration_s=2.0)
+    assert 10 <= published <= 22  # about half of 2 s x 15 fps
+    assert listener.wait_for(lambda: len(listener.received["nw"]) >= 10, timeout=10)
+    assert not listener.errors

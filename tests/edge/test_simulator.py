@@ -171,3 +171,13 @@ def test_people_do_not_walk_through_each_other(site_path, people, seed):
     closest = np.array(closest)
     assert np.mean(closest < 0.5) < 0.01
     assert closest.min() > 0.1  # never inside each other
+
+
+def test_every_simulated_frame_encodes(site):
+    """Pixel noise near the image border once produced inverted boxes the encoder refused."""
+    from edge import wire
+    world = World(site, 5, seed=7)
+    for cam_id in site.camera_ids:
+        cam = SimCamera(world, cam_id)
+        for f in range(300):
+            wire.encode(cam.observe(int((T0 + f / 15) * 1e9))[0])
