@@ -19,16 +19,23 @@ from tests.conftest import WTF_SITE, free_port
 SITE = str(WTF_SITE)
 
 
+# The model card's simulated figures for the shipped int8 model (the same demo, no camera killed):
+# position MAE 91 mm, yaw MAE 7.8 deg. Bounds here: 1.5 times those (camera 3 dies half way).
+CARD_POSITION_MM, CARD_YAW_DEG = 91.0, 7.8
+
+
 @pytest.mark.slow
 def test_three_people_sixty_seconds_and_a_camera_killed():
-    """3 cameras, 3 people in distinct clothing, 60 simulated seconds at 3x; camera 3 dies at 30 s."""
+    """3 cameras, 3 people in distinct clothing, 60 simulated seconds at 3x, the shipped int8
+    model; camera 3 dies at 30 s."""
     summary = run_demo(DemoConfig(site=SITE, people=3, seed=7, duration_s=60, clock_scale=3.0, port=free_port(),
-                                  kill_camera="3", kill_at_s=30, table=False, estimator="analytic"))
+                                  kill_camera="3", kill_at_s=30, table=False))
     assert summary["people_confirmed"] == 3, summary
     assert summary["tracks"] == 3, summary  # exactly three people, never a fourth
     assert all(d <= 3.0 for d in summary["confirm_delay_s"].values()), summary
     assert summary["id_switches"] == 0, summary
-    assert summary["position_mae_mm"] < 150 and summary["yaw_mae_deg"] < 15, summary
+    assert summary["position_mae_mm"] <= 1.5 * CARD_POSITION_MM, summary
+    assert summary["yaw_mae_deg"] <= 1.5 * CARD_YAW_DEG, summary
     # After camera 3 died the host kept publishing from the other two and reported it gone.
     assert summary["pose_arrays_after_kill"] > 100, summary
     assert summary["cameras_alive_at_end"] == ["1", "2"], summary
