@@ -135,7 +135,7 @@ def _feeder(port: int, data_path: str, site_name: str) -> None:
             pub.put(payload)
 
 
-def over_zenoh(site: Site, model: str | None, people: int, seconds: float) -> dict:
+def over_zenoh(site: Site, model: str | None, people: int, seconds: float, gen_s: float) -> dict:
     """Host process on one core, feeder process, loopback Zenoh: capture -> PoseArray arrival."""
     import pickle
 
@@ -146,7 +146,7 @@ def over_zenoh(site: Site, model: str | None, people: int, seconds: float) -> di
     port = free_port()
     tmp = Path(tempfile.mkdtemp(prefix="host-bench-"))
     (tmp / "site.toml").write_text(dump_site(site))
-    t0 = time.time_ns() + int(4e9) + int(people * len(site.cameras) * seconds * 3e6)  # after generation and start-up
+    t0 = time.time_ns() + int((4.0 + 1.5 * gen_s) * 1e9)  # after generating the data again and starting the processes
     data = frames(site, people, seconds, t0)
     (tmp / "data.pkl").write_bytes(pickle.dumps(data))
     arrivals: list[tuple[int, pose_msg.PoseArray]] = []
@@ -195,12 +195,14 @@ def main(model: str | None, seconds: float, use_zenoh: bool, json_out: str | Non
         site = ring_site(n)
         estimator, name = build_estimator(site, "onnx" if model else "analytic", model)
         for people in (1, 5, 10):
+            t_gen = time.monotonic()
             data = frames(site, people, seconds, 1_700_000_000 * 10**9)
+            gen_s = time.monotonic() - t_gen
             r = processing(site, estimator, name, data, 1.0)
             r["max_sustained_obs_per_s"] = sustained(site, estimator, name, data, n * FPS)
             if use_zenoh:
                 os.sched_setaffinity(0, set(range(os.cpu_count() or 1)))
-                r.update(over_zenoh(site, model, people, seconds))
+                r.update(over_zenoh(site, model, people, seconds, gen_s))
                 os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
             results[f"{n}x{people}"] = r
             line = (f"{n:>7} {people:>6} {n * FPS:>6.0f} {r['p50_ms']:>7.2f} {r['p99_ms']:>7.2f} {r['obs_per_step']:>8.2f} "

@@ -17,6 +17,7 @@ yaw = atan2(sin, cos), wrapped to (-pi, pi] (REP-103: counter-clockwise from +x)
 from __future__ import annotations
 
 import json
+import logging
 from pathlib import Path
 from typing import Final, Mapping, Protocol, Sequence, runtime_checkable
 
@@ -52,6 +53,8 @@ META_POSE_ORIGIN: Final[str] = "pose.origin"  # JSON [x, y]: origin of the raw o
 META_MODEL_CONFIG: Final[str] = "model.config"  # JSON: arch and hyper-parameters
 META_TRAIN_CONFIG: Final[str] = "train.config"  # JSON: the training run's config
 POSE_FRAMES: Final[tuple[str, ...]] = ("world", "floor_centre")
+
+log = logging.getLogger("superbody.host")
 
 
 class ModelMismatchError(ValueError):
@@ -137,10 +140,8 @@ class OnnxEstimator:
                 f"site {site.name!r} has {list(site.camera_ids)}: {detail}"
             )
         if spec.variant == "rays" and len(site.cameras) > spec.max_views:
-            raise ModelMismatchError(
-                f"{where}: the model takes at most {spec.max_views} views per person, "
-                f"site {site.name!r} has {len(site.cameras)} cameras"
-            )
+            # Not an error: build_batch keeps the max_views views with the most detected joints.
+            log.info("%s: site %r has %d cameras; each person's %d best views are used", where, site.name, len(site.cameras), spec.max_views)
         expected = {
             "x": [spec.num_nodes, spec.num_features],
             "adj": [spec.num_relations, spec.num_nodes, spec.num_nodes],
