@@ -103,7 +103,8 @@ def processing(site: Site, estimator, name: str, data: list, speed: float) -> di
         i = j
     warm = lat[len(lat) // 3 :] * 1e3  # after the tracker's first seconds of confirming people
     return {"p50_ms": float(np.percentile(warm, 50)), "p99_ms": float(np.percentile(warm, 99)),
-            "obs_per_step": len(data) / batches, "people_tracked": int(np.median(people[len(people) // 3 :])),
+            # People published at the end (a median over steps would favour the many small early steps).
+            "obs_per_step": len(data) / batches, "people_tracked": people[-1],
             "backlog_s": float(lat[-1]), "rejected": dict(agg.rejected)}
 
 
