@@ -63,6 +63,7 @@ __all__ = [
     "GraphBatch",
     "build_batch",
     "adjacency_template",
+    "masked_adjacency",
     "floor_centre",
     "SLOT_SIZE",
     "NUM_NODE_TYPES",
@@ -356,6 +357,13 @@ def adjacency_template(spec: GraphSpec) -> NDArray[np.float32]:
     mask only and rebuilds adj per mini-batch.
     """
     return _static(spec).template
+
+
+def masked_adjacency(spec: GraphSpec, mask: NDArray) -> NDArray[np.float32]:
+    """(B, R, N, N) adjacency of graphs whose present nodes are ``mask`` (B, N): the template
+    with every edge that touches an absent node removed (what ``build_batch`` gives)."""
+    m = np.asarray(mask, dtype=np.float32)
+    return adjacency_template(spec)[None] * m[:, None, :, None] * m[:, None, None, :]
 
 
 def _slots_for(views: Mapping[str, PersonView], b: int, spec: GraphSpec, st: _Static, site_index: dict[str, int]) -> list[tuple[int, str]]:

@@ -30,6 +30,7 @@ import torch.nn.functional as F
 from numpy.typing import NDArray
 
 from edge.site import Site
+from host.estimator import decode_output
 from host.graph import SLOT_SIZE, SUPERBODY, GraphSpec, floor_centre
 
 __all__ = [
@@ -66,9 +67,7 @@ def pose_targets(truth: NDArray, origin: NDArray, scale: float) -> NDArray[np.fl
 def decode_pose(out: NDArray, origin: NDArray, scale: float) -> NDArray[np.float64]:
     """Normalised outputs (B, 4) -> world poses (B, 3), yaw wrapped to (-pi, pi]."""
     out = np.asarray(out, dtype=np.float64).reshape(-1, 4)
-    yaw = np.arctan2(out[:, 2], out[:, 3])  # [-pi, pi]
-    yaw = np.where(yaw <= -np.pi, np.pi, yaw)
-    return np.column_stack([out[:, :2] * scale + np.asarray(origin, dtype=np.float64), yaw])
+    return decode_output(np.column_stack([out[:, :2] * scale, out[:, 2:]]), origin)
 
 
 class PoseNet(nn.Module):

@@ -34,7 +34,7 @@ from tqdm import tqdm
 
 from edge.angles import wrap_angle
 from edge.site import Site, SiteError, load_site
-from host.graph import GraphBatch, GraphSpec, adjacency_template, build_batch, floor_centre
+from host.graph import GraphBatch, GraphSpec, adjacency_template, build_batch, floor_centre, masked_adjacency
 from models.samples import Sample
 
 __all__ = ["TrainConfig", "TrainResult", "train", "prepare", "register"]
@@ -256,9 +256,8 @@ def train(cfg: TrainConfig, progress: bool = True) -> TrainResult:
     model.eval()
     val_out, val_y = _predict(model, forward, val, cfg.batch_size)
     calib_idx = rng.choice(tr, size=min(512, len(tr)), replace=False)
-    calibration = [GraphBatch(x=X[calib_idx[i : i + 128]], adj=(adjacency_template(spec)[None] * M[calib_idx[i : i + 128], None, :, None]
-                                                                * M[calib_idx[i : i + 128], None, None, :]).astype(np.float32),
-                              mask=M[calib_idx[i : i + 128]]) for i in range(0, len(calib_idx), 128)]
+    chunks = [calib_idx[i : i + 128] for i in range(0, len(calib_idx), 128)]
+    calibration = [GraphBatch(x=X[c], adj=masked_adjacency(spec, M[c]), mask=M[c]) for c in chunks]
     return TrainResult(model=model, spec=spec, history=history, best_epoch=best[1], minutes=(time.monotonic() - t0) / 60,
                        val=_metrics(val_out, val_y, model.scale) if len(val) else {}, calibration=calibration)
 
