@@ -38,13 +38,13 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from edge import transport, wire  # noqa: E402
-from edge.camera import Camera, look_at_rotation  # noqa: E402
-from edge.simulator import SimCamera, World  # noqa: E402
-from edge.site import Site, dump_site  # noqa: E402
-from host import pose as pose_msg  # noqa: E402
-from host.aggregator import Aggregator  # noqa: E402
-from host.cli import build_estimator  # noqa: E402
+from superbody.edge import transport, wire  # noqa: E402
+from superbody.edge.camera import Camera, look_at_rotation  # noqa: E402
+from superbody.edge.simulator import SimCamera, World  # noqa: E402
+from superbody.edge.site import Site, dump_site  # noqa: E402
+from superbody.host import pose as pose_msg  # noqa: E402
+from superbody.host.aggregator import Aggregator  # noqa: E402
+from superbody.host.cli import build_estimator  # noqa: E402
 
 FPS = 30.0
 
@@ -154,7 +154,7 @@ def over_zenoh(site: Site, model: str | None, people: int, seconds: float, gen_s
     conf = transport.session_config("peer", connect=[], listen=[f"tcp/127.0.0.1:{port}"])
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     core = min(os.sched_getaffinity(0))
-    host_args = [sys.executable, "-m", "edge.cli", "host", "run", "--site", str(tmp / "site.toml"), "--connect", f"tcp/127.0.0.1:{port}",
+    host_args = [sys.executable, "-m", "superbody.edge.cli", "host", "run", "--site", str(tmp / "site.toml"), "--connect", f"tcp/127.0.0.1:{port}",
                  *(["--model", model] if model else ["--estimator", "analytic"])]
     with zenoh.open(conf) as session:
         sub = session.declare_subscriber(transport.people_key(site.name), lambda s: arrivals.append((time.time_ns(), pose_msg.decode(s.payload.to_bytes()))))

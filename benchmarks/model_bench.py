@@ -21,9 +21,9 @@ sys.path.insert(0, str(ROOT))
 
 import onnxruntime as ort  # noqa: E402
 
-from edge.site import load_site  # noqa: E402
-from host.graph import GraphSpec, build_batch  # noqa: E402
-from models.simdata import SimDataConfig, generate  # noqa: E402
+from superbody.edge.site import load_site  # noqa: E402
+from superbody.host.graph import GraphSpec, build_batch  # noqa: E402
+from superbody.models.simdata import SimDataConfig, generate  # noqa: E402
 
 
 def _rate(fn, seconds: float) -> tuple[float, int]:

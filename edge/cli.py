@@ -64,7 +64,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the edge package's commands: ``edge run``, ``router``."""
-    from edge import node, router
+    from superbody.edge import node, router
 
     node.register(sub)
     router.register(sub)

@@ -42,7 +42,7 @@ class WorldClock:
 
 def add_clock_args(parser: argparse.ArgumentParser) -> None:
     """``--clock-scale`` and ``--clock-anchor-ns``: every process of a run must get the same."""
-    from edge.cli import positive
+    from superbody.edge.cli import positive
 
     parser.add_argument("--clock-scale", type=positive, default=1.0, help="world seconds per wall second (simulation speed-up)")
     parser.add_argument("--clock-anchor-ns", type=int, default=0, help="wall time (UNIX ns) at which world and wall clocks agree")

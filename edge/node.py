@@ -19,11 +19,11 @@ import threading
 import time
 from typing import Protocol
 
-from edge import transport, wire
-from edge.cli import int_in, positive
-from edge.clock import WorldClock, add_clock_args, clock_from_args
-from edge.observation import Observation
-from edge.site import Site, SiteError, load_site
+from superbody.edge import transport, wire
+from superbody.edge.cli import int_in, positive
+from superbody.edge.clock import WorldClock, add_clock_args, clock_from_args
+from superbody.edge.observation import Observation
+from superbody.edge.site import Site, SiteError, load_site
 
 __all__ = ["Source", "SimSource", "make_source", "run_node", "register", "SOURCES"]
 
@@ -42,7 +42,7 @@ class SimSource:
     """Simulated people seen by one camera of a site (edge/simulator.py)."""
 
     def __init__(self, site: Site, camera_id: str, seed: int, people: int = 3, depth: bool = False):
-        from edge.simulator import SimCamera, World
+        from superbody.edge.simulator import SimCamera, World
 
         self._cam = SimCamera(World(site, people, seed), camera_id, depth=depth)
 

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from edge.body import NUM_KEYPOINTS
-from edge.colour import HIST_BINS
+from superbody.edge.body import NUM_KEYPOINTS
+from superbody.edge.colour import HIST_BINS
 
 __all__ = ["PersonView", "Observation", "empty_keypoints", "empty_histogram"]
 

@@ -13,7 +13,7 @@ import json
 import numbers
 from typing import Any, Final, Literal, NoReturn, get_args
 
-from edge.site import NAME_RE
+from superbody.edge.site import NAME_RE
 
 __all__ = [
     "ROOT",

@@ -11,7 +11,7 @@ import logging
 import signal
 import threading
 
-from edge import transport
+from superbody.edge import transport
 
 __all__ = ["run_router", "register"]
 

@@ -30,12 +30,12 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from edge import body
-from edge.angles import wrap_angle
-from edge.camera import Camera, project, world_to_camera
-from edge.colour import hs_histogram
-from edge.observation import Observation, PersonView
-from edge.site import Site
+from superbody.edge import body
+from superbody.edge.angles import wrap_angle
+from superbody.edge.camera import Camera, project, world_to_camera
+from superbody.edge.colour import hs_histogram
+from superbody.edge.observation import Observation, PersonView
+from superbody.edge.site import Site
 
 __all__ = [
     "NoiseModel",

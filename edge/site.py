@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from edge.camera import Camera, look_at_rotation
+from superbody.edge.camera import Camera, look_at_rotation
 
 __all__ = ["Site", "Obstacle", "SiteError", "load_site", "parse_site", "dump_site", "NAME_RE"]
 

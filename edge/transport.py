@@ -43,7 +43,7 @@ Mode = Literal["peer", "client", "router"]
 
 def _checked(site: str, camera: str | None = None) -> None:
     """Names become key chunks: reject anything that is not a valid site/camera id ("*" matches all cameras)."""
-    from edge.site import NAME_RE
+    from superbody.edge.site import NAME_RE
 
     for field, value in (("site", site), ("camera", camera)):
         if value is None or (field == "camera" and value == "*"):

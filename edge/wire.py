@@ -26,10 +26,10 @@ from typing import TYPE_CHECKING, Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
-from edge.body import NUM_KEYPOINTS
-from edge.colour import HIST_BINS
-from edge.observation import Observation, PersonView
-from edge.payload import (
+from superbody.edge.body import NUM_KEYPOINTS
+from superbody.edge.colour import HIST_BINS
+from superbody.edge.observation import Observation, PersonView
+from superbody.edge.payload import (
     MAX_INT63,
     REASONS,
     DecodeError,

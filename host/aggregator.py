@@ -29,14 +29,14 @@ from typing import Callable
 
 import numpy as np
 
-from edge import transport, wire
-from edge.clock import WorldClock
-from edge.observation import PersonView
-from edge.site import Site
-from host import pose as pose_msg
-from host.estimator import Estimator
-from host.filter import FilterConfig, PoseFilter
-from host.tracker import Tracker, TrackerConfig
+from superbody.edge import transport, wire
+from superbody.edge.clock import WorldClock
+from superbody.edge.observation import PersonView
+from superbody.edge.site import Site
+from superbody.host import pose as pose_msg
+from superbody.host.estimator import Estimator
+from superbody.host.filter import FilterConfig, PoseFilter
+from superbody.host.tracker import Tracker, TrackerConfig
 
 __all__ = ["HostConfig", "Aggregator", "run_host", "confidence"]
 

@@ -20,10 +20,10 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from edge import body
-from edge.camera import intersect_plane, pixel_to_ray
-from edge.observation import PersonView
-from edge.site import Site
+from superbody.edge import body
+from superbody.edge.camera import intersect_plane, pixel_to_ray
+from superbody.edge.observation import PersonView
+from superbody.edge.site import Site
 
 __all__ = ["AnalyticEstimator", "triangulate", "joints_3d"]
 

@@ -10,10 +10,10 @@ import threading
 from dataclasses import replace
 from pathlib import Path
 
-from edge import transport
-from edge.cli import positive
-from edge.clock import add_clock_args, clock_from_args
-from edge.site import Site, SiteError, load_site
+from superbody.edge import transport
+from superbody.edge.cli import positive
+from superbody.edge.clock import add_clock_args, clock_from_args
+from superbody.edge.site import Site, SiteError, load_site
 
 __all__ = ["register", "build_estimator", "default_model"]
 
@@ -40,7 +40,7 @@ def build_estimator(site: Site, kind: str = "onnx", model: str | Path | None = N
         host.estimator.ModelMismatchError: the model does not fit the site.
     """
     if kind == "analytic":
-        from host.analytic import AnalyticEstimator
+        from superbody.host.analytic import AnalyticEstimator
 
         return AnalyticEstimator(site), "analytic"
     if kind != "onnx":
@@ -51,7 +51,7 @@ def build_estimator(site: Site, kind: str = "onnx", model: str | Path | None = N
                          "pass --model M.onnx or --estimator analytic")
     if not path.is_file():
         raise ValueError(f"--model {path}: no such file")
-    from host.estimator import OnnxEstimator
+    from superbody.host.estimator import OnnxEstimator
 
     return OnnxEstimator(path, site), f"onnx:{path.name}"
 
@@ -64,10 +64,10 @@ def _unit(text: str) -> float:
 
 
 def _run_host(args: argparse.Namespace) -> int:
-    from host.aggregator import Aggregator, HostConfig, run_host
-    from host.estimator import ModelMismatchError
-    from host.filter import FilterConfig
-    from host.tracker import TrackerConfig
+    from superbody.host.aggregator import Aggregator, HostConfig, run_host
+    from superbody.host.estimator import ModelMismatchError
+    from superbody.host.filter import FilterConfig
+    from superbody.host.tracker import TrackerConfig
 
     try:
         site = load_site(args.site)
@@ -81,7 +81,7 @@ def _run_host(args: argparse.Namespace) -> int:
         conf = transport.config_from_args(args)
         serial = None
         if args.serial:
-            from host.serial_link import SerialLink
+            from superbody.host.serial_link import SerialLink
 
             serial = SerialLink(args.serial, args.baud)
     except (SiteError, ValueError, ModelMismatchError, OSError) as e:
@@ -116,6 +116,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     transport.add_session_args(p)
     p.set_defaults(func=_run_host)
 
-    from host import demo
+    from superbody.host import demo
 
     demo.register(sub)

@@ -30,13 +30,13 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from edge import transport, wire
-from edge.cli import int_in, positive
-from edge.clock import WorldClock
-from edge.angles import wrap_angle
-from edge.simulator import SimCamera, World
-from edge.site import SiteError, load_site
-from host import pose as pose_msg
+from superbody.edge import transport, wire
+from superbody.edge.cli import int_in, positive
+from superbody.edge.clock import WorldClock
+from superbody.edge.angles import wrap_angle
+from superbody.edge.simulator import SimCamera, World
+from superbody.edge.site import SiteError, load_site
+from superbody.host import pose as pose_msg
 
 __all__ = ["DemoConfig", "run_demo", "register"]
 
@@ -201,7 +201,7 @@ class _Watcher:
 def _spawn(args: list[str], log_path: Path) -> subprocess.Popen:
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     out = open(log_path, "w")
-    return subprocess.Popen([sys.executable, "-m", "edge.cli", *args], stdout=out, stderr=subprocess.STDOUT, env=env,
+    return subprocess.Popen([sys.executable, "-m", "superbody.edge.cli", *args], stdout=out, stderr=subprocess.STDOUT, env=env,
                             cwd=_ROOT, start_new_session=True)
 
 

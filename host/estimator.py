@@ -25,9 +25,9 @@ import numpy as np
 import onnxruntime as ort
 from numpy.typing import NDArray
 
-from edge.observation import PersonView
-from edge.site import Site
-from host.graph import GraphSpec, Variant, build_batch, floor_centre
+from superbody.edge.observation import PersonView
+from superbody.edge.site import Site
+from superbody.host.graph import GraphSpec, Variant, build_batch, floor_centre
 
 __all__ = [
     "Estimator",

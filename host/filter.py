@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from edge.angles import wrap_angle
+from superbody.edge.angles import wrap_angle
 
 __all__ = ["predict", "update", "white_accel_noise", "FilterConfig", "FilteredPose", "PoseFilter"]
 

@@ -51,10 +51,10 @@ from typing import Final, Literal, Mapping, Sequence, get_args
 import numpy as np
 from numpy.typing import NDArray
 
-from edge.body import KEYPOINTS, MIRROR, NUM_KEYPOINTS, PARENT, TYPICAL_HEIGHT_M
-from edge.camera import pixel_to_ray
-from edge.observation import PersonView
-from edge.site import Site
+from superbody.edge.body import KEYPOINTS, MIRROR, NUM_KEYPOINTS, PARENT, TYPICAL_HEIGHT_M
+from superbody.edge.camera import pixel_to_ray
+from superbody.edge.observation import PersonView
+from superbody.edge.site import Site
 
 __all__ = [
     "Variant",

@@ -29,9 +29,9 @@ from typing import Final, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from edge.body import INDEX, LEFT_HIP, LEFT_SHOULDER, RIGHT_HIP, RIGHT_SHOULDER, TYPICAL_HEIGHT_M
-from edge.camera import Camera, intersect_plane, pixel_to_ray
-from edge.observation import PersonView
+from superbody.edge.body import INDEX, LEFT_HIP, LEFT_SHOULDER, RIGHT_HIP, RIGHT_SHOULDER, TYPICAL_HEIGHT_M
+from superbody.edge.camera import Camera, intersect_plane, pixel_to_ray
+from superbody.edge.observation import PersonView
 
 __all__ = ["MAX_RANGE_M", "LEVELS", "Level", "ground_point", "ground_points"]
 

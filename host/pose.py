@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
-from edge.payload import (
+from superbody.edge.payload import (
     MAX_INT63,
     REASONS,
     DecodeError,

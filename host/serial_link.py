@@ -31,7 +31,7 @@ from typing import Any, Final, NamedTuple
 import numpy as np
 import serial
 
-from host.pose import PoseArray
+from superbody.host.pose import PoseArray
 
 __all__ = [
     "SYNC",

@@ -33,12 +33,12 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
-from edge.body import NUM_KEYPOINTS
-from edge.colour import HIST_BINS, bhattacharyya_matrix
-from edge.observation import Observation, PersonView
-from edge.site import Site
-from host.filter import predict, update, white_accel_noise
-from host.ground import ground_points
+from superbody.edge.body import NUM_KEYPOINTS
+from superbody.edge.colour import HIST_BINS, bhattacharyya_matrix
+from superbody.edge.observation import Observation, PersonView
+from superbody.edge.site import Site
+from superbody.host.filter import predict, update, white_accel_noise
+from superbody.host.ground import ground_points
 
 __all__ = [
     "TrackerConfig",

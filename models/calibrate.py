@@ -27,10 +27,10 @@ import scipy.linalg
 import scipy.optimize
 from numpy.typing import NDArray
 
-from edge.body import INDEX
-from edge.camera import Camera, project
-from edge.site import Site
-from models.wtf import CAMERA_IDS, IMAGE_HEIGHT, IMAGE_WIDTH, RawSample
+from superbody.edge.body import INDEX
+from superbody.edge.camera import Camera, project
+from superbody.edge.site import Site
+from superbody.models.wtf import CAMERA_IDS, IMAGE_HEIGHT, IMAGE_WIDTH, RawSample
 
 __all__ = [
     "MIN_POINTS",

@@ -27,7 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _add_train(sub: argparse._SubParsersAction) -> None:
-    from models import crossval, train  # light: torch is imported only when a run starts
+    from superbody.models import crossval, train  # light: torch is imported only when a run starts
 
     train.register(sub)
     crossval.register(sub)
@@ -102,8 +102,8 @@ def _print_calibration(site, fits: dict, errors: dict[str, tuple[float, float, i
 
 
 def _run_calibrate_from_dataset(args: argparse.Namespace) -> int:
-    from edge.site import SiteError, dump_site, load_site, parse_site
-    from models.wtf import DatasetError, load_wtf_raw
+    from superbody.edge.site import SiteError, dump_site, load_site, parse_site
+    from superbody.models.wtf import DatasetError, load_wtf_raw
 
     command = "calibrate from-dataset"
     if not args.fps > 0:
@@ -113,7 +113,7 @@ def _run_calibrate_from_dataset(args: argparse.Namespace) -> int:
         # Imported after the file is read: a bad path fails fast, without loading scipy.
         import numpy as np
 
-        from models.calibrate import calibrate_dataset, dataset_pairs, reprojection_errors
+        from superbody.models.calibrate import calibrate_dataset, dataset_pairs, reprojection_errors
 
         site, fits = calibrate_dataset(raw, name=args.name, fps=args.fps)
         # The errors of the cameras exactly as written (dump_site rounds to 1e-9), for the header.
@@ -146,7 +146,7 @@ _MAX_TRUTH_OFFSET_M = 1.0
 
 
 def _add_eval(sub: argparse._SubParsersAction) -> None:
-    from models.wtf import TRUTH_OFFSET_M  # numpy only
+    from superbody.models.wtf import TRUTH_OFFSET_M  # numpy only
 
     p = sub.add_parser(
         "eval",
@@ -185,8 +185,8 @@ def _model_names(paths: list[Path]) -> list[str]:
 def _run_eval(args: argparse.Namespace) -> int:
     import math
 
-    from edge.site import SiteError, load_site
-    from models.wtf import DatasetError, load_wtf
+    from superbody.edge.site import SiteError, load_site
+    from superbody.models.wtf import DatasetError, load_wtf
 
     command = "eval"
     if not (math.isfinite(args.truth_offset) and abs(args.truth_offset) <= _MAX_TRUTH_OFFSET_M):
@@ -210,8 +210,8 @@ def _run_eval(args: argparse.Namespace) -> int:
     except (DatasetError, SiteError, ValueError) as e:  # ModelMismatchError is a ValueError
         return _fail(command, str(e))
 
-    from host.analytic import AnalyticEstimator
-    from models.evaluate import format_table, json_report, predict, score, write_predictions_csv
+    from superbody.host.analytic import AnalyticEstimator
+    from superbody.models.evaluate import format_table, json_report, predict, score, write_predictions_csv
 
     estimators[_BASELINE] = AnalyticEstimator(site)
     try:
@@ -233,7 +233,7 @@ def _run_eval(args: argparse.Namespace) -> int:
             write_predictions_csv(args.predictions_out, samples, predictions[names[0]], args.truth_offset)
             print(f"wrote {args.predictions_out}")
         if args.plots is not None:
-            from models.plots import write_plots
+            from superbody.models.plots import write_plots
 
             for path in write_plots(args.plots, samples, predictions, args.truth_offset):
                 print(f"wrote {path}")
@@ -244,7 +244,7 @@ def _run_eval(args: argparse.Namespace) -> int:
 
 def _load_model(path: Path, site):
     """An OnnxEstimator for the site; ValueError (one line) if the file is missing or unreadable."""
-    from host.estimator import ModelMismatchError, OnnxEstimator
+    from superbody.host.estimator import ModelMismatchError, OnnxEstimator
 
     if not path.is_file():
         raise ValueError(f"--model {path}: no such file")

@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from edge.site import SiteError, load_site
-from models.train import TrainConfig, add_train_args, config_from_args, train
+from superbody.edge.site import SiteError, load_site
+from superbody.models.train import TrainConfig, add_train_args, config_from_args, train
 
 __all__ = ["fold_ranges", "crossvalidate", "register"]
 
@@ -44,9 +44,9 @@ def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = N
         ``{"folds": [...], "reports": {"model": report, "analytic": report}}`` with reports as
         ``models.evaluate.summarise`` gives them.
     """
-    from host.analytic import AnalyticEstimator
-    from models.evaluate import predict, score
-    from models.wtf import TRUTH_OFFSET_M, load_wtf
+    from superbody.host.analytic import AnalyticEstimator
+    from superbody.models.evaluate import predict, score
+    from superbody.models.wtf import TRUTH_OFFSET_M, load_wtf
 
     if not cfg.real:
         raise ValueError("cross-validation needs real data (--real)")
@@ -76,7 +76,7 @@ class _TorchEstimator:
     def estimate(self, view_sets):
         import torch
 
-        from host.graph import build_batch
+        from superbody.host.graph import build_batch
 
         if not view_sets:
             return np.zeros((0, 3))
@@ -87,7 +87,7 @@ class _TorchEstimator:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from models.evaluate import format_table
+    from superbody.models.evaluate import format_table
 
     try:
         cfg = config_from_args(args)

@@ -34,10 +34,10 @@ import numpy as np
 from numpy.typing import NDArray
 from tqdm import tqdm
 
-from edge.angles import wrap_angle
-from host.estimator import Estimator
-from models.samples import Sample
-from models.wtf import CAMERA_IDS, to_dataset_frame, torso_to_truth
+from superbody.edge.angles import wrap_angle
+from superbody.host.estimator import Estimator
+from superbody.models.samples import Sample
+from superbody.models.wtf import CAMERA_IDS, to_dataset_frame, torso_to_truth
 
 __all__ = [
     "PAPER_POSITION_SCALE_MM",

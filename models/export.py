@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 from onnxruntime.quantization import CalibrationDataReader, CalibrationMethod, QuantFormat, QuantType, quantize_static
 from onnxruntime.quantization.shape_inference import quant_pre_process
 
-from host.estimator import (
+from superbody.host.estimator import (
     INPUT_NAMES,
     META_MODEL_CONFIG,
     META_POSE_FRAME,
@@ -46,8 +46,8 @@ from host.estimator import (
     META_TRAIN_CONFIG,
     OUTPUT_NAME,
 )
-from host.graph import GraphBatch, GraphSpec
-from models.nets import PoseNet
+from superbody.host.graph import GraphBatch, GraphSpec
+from superbody.models.nets import PoseNet
 
 __all__ = ["export_onnx", "quantize_int8", "read_metadata", "GraphBatchReader", "QUANTIZED_OPS", "KEEP_FP32"]
 

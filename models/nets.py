@@ -29,9 +29,9 @@ import torch.nn as nn
 import torch.nn.functional as F
 from numpy.typing import NDArray
 
-from edge.site import Site
-from host.estimator import decode_output
-from host.graph import SLOT_SIZE, SUPERBODY, GraphSpec, floor_centre
+from superbody.edge.site import Site
+from superbody.host.estimator import decode_output
+from superbody.host.graph import SLOT_SIZE, SUPERBODY, GraphSpec, floor_centre
 
 __all__ = [
     "Arch",

@@ -16,10 +16,10 @@ from typing import TYPE_CHECKING, Final, Mapping, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from edge.angles import wrap_angle
-from models.evaluate import CAMERA_COUNTS, camera_counts, sample_errors
-from models.samples import Sample
-from models.wtf import torso_to_truth
+from superbody.edge.angles import wrap_angle
+from superbody.models.evaluate import CAMERA_COUNTS, camera_counts, sample_errors
+from superbody.models.samples import Sample
+from superbody.models.wtf import torso_to_truth
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure

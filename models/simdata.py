@@ -24,11 +24,11 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from edge.camera import Camera, look_at_rotation
-from edge.observation import PersonView
-from edge.simulator import NoiseModel, World, render_views
-from edge.site import Obstacle, Site
-from models.samples import Sample
+from superbody.edge.camera import Camera, look_at_rotation
+from superbody.edge.observation import PersonView
+from superbody.edge.simulator import NoiseModel, World, render_views
+from superbody.edge.site import Obstacle, Site
+from superbody.models.samples import Sample
 
 __all__ = ["SimDataConfig", "generate", "random_site", "save_samples", "load_samples"]
 _CHUNK = 400

@@ -8,9 +8,9 @@ from __future__ import annotations
 import numpy as np
 from tqdm import tqdm
 
-from edge import body
-from edge.simulator import NoiseModel, SimCamera, World
-from edge.site import load_site
+from superbody.edge import body
+from superbody.edge.simulator import NoiseModel, SimCamera, World
+from superbody.edge.site import load_site
 
 __all__ = ["statistics", "simulate"]
 

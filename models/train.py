@@ -32,10 +32,10 @@ import numpy as np
 from numpy.typing import NDArray
 from tqdm import tqdm
 
-from edge.angles import wrap_angle
-from edge.site import Site, SiteError, load_site
-from host.graph import GraphBatch, GraphSpec, adjacency_template, build_batch, floor_centre, masked_adjacency
-from models.samples import Sample
+from superbody.edge.angles import wrap_angle
+from superbody.edge.site import Site, SiteError, load_site
+from superbody.host.graph import GraphBatch, GraphSpec, adjacency_template, build_batch, floor_centre, masked_adjacency
+from superbody.models.samples import Sample
 
 __all__ = ["TrainConfig", "TrainResult", "train", "prepare", "register"]
 
@@ -139,7 +139,7 @@ def prepare(samples: list[Sample], site: Site, spec: GraphSpec, model, chunk: in
 
 def _datasets(cfg: TrainConfig, site: Site, spec: GraphSpec, model, progress: bool) -> tuple[NDArray, NDArray, NDArray, NDArray]:
     """Training arrays and a per-sample weight of 'real' (1) or simulated (0)."""
-    from models.simdata import SimDataConfig, generate, random_site
+    from superbody.models.simdata import SimDataConfig, generate, random_site
 
     parts: list[tuple[NDArray, NDArray, NDArray, NDArray]] = []
     if cfg.sim_samples:
@@ -156,7 +156,7 @@ def _datasets(cfg: TrainConfig, site: Site, spec: GraphSpec, model, progress: bo
             x, m, y = prepare(samples, site, spec, model)
             parts.append((x, m, y, np.zeros(len(x), np.float32)))
     if cfg.real:
-        from models.wtf import load_wtf, truth_to_torso
+        from superbody.models.wtf import load_wtf, truth_to_torso
 
         real = load_wtf(cfg.real, site=site if cfg.use_3d else None)
         if cfg.real_exclude:
@@ -182,7 +182,7 @@ def train(cfg: TrainConfig, progress: bool = True) -> TrainResult:
     """Train a model as ``cfg`` says; returns it with its history (no files written)."""
     import torch
 
-    from models.nets import build_model
+    from superbody.models.nets import build_model
 
     torch.manual_seed(cfg.seed)
     torch.set_num_threads(cfg.threads)
@@ -282,7 +282,7 @@ def save(result: TrainResult, cfg: TrainConfig, out_dir: str | Path, name: str, 
     """Write <name>.pt (state and config), <name>.fp32.onnx, <name>.int8.onnx and <name>.train.json."""
     import torch
 
-    from models.export import export_onnx, quantize_int8
+    from superbody.models.export import export_onnx, quantize_int8
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -43,12 +43,12 @@ from typing import Any, Final, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from edge.angles import wrap_angle
-from edge.body import INDEX, KEYPOINTS, NUM_KEYPOINTS
-from edge.camera import Camera, world_to_camera
-from edge.observation import PersonView, empty_histogram
-from edge.site import Site
-from models.samples import Sample
+from superbody.edge.angles import wrap_angle
+from superbody.edge.body import INDEX, KEYPOINTS, NUM_KEYPOINTS
+from superbody.edge.camera import Camera, world_to_camera
+from superbody.edge.observation import PersonView, empty_histogram
+from superbody.edge.site import Site
+from superbody.models.samples import Sample
 
 __all__ = [
     "CAMERA_IDS",

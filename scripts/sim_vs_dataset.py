@@ -18,9 +18,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from edge import body  # noqa: E402
-from models.simstats import simulate, statistics  # noqa: E402
-from models.wtf import load_wtf  # noqa: E402
+from superbody.edge import body  # noqa: E402
+from superbody.models.simstats import simulate, statistics  # noqa: E402
+from superbody.models.wtf import load_wtf  # noqa: E402
 
 
 def _row(name: str, a: float, b: float, fmt: str = "{:.3f}") -> str:

@@ -31,7 +31,7 @@ class Processes:
 
     def start(self, *args: str, stdout=subprocess.DEVNULL) -> subprocess.Popen:
         env = dict(os.environ, PYTHONUNBUFFERED="1")
-        p = subprocess.Popen([sys.executable, "-m", "edge.cli", *args], cwd=ROOT, env=env,
+        p = subprocess.Popen([sys.executable, "-m", "superbody.edge.cli", *args], cwd=ROOT, env=env,
                              stdout=stdout, stderr=subprocess.PIPE, text=True)
         self.procs.append(p)
         return p

@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from edge.camera import Camera, intersect_plane, look_at_rotation, pixel_to_ray, project
+from superbody.edge.camera import Camera, intersect_plane, look_at_rotation, pixel_to_ray, project
 
 
 def _camera(dist=()) -> Camera:

@@ -4,7 +4,7 @@ import cv2
 import numpy as np
 import pytest
 
-from edge.colour import HIST_BINS, bhattacharyya, bhattacharyya_matrix, hs_histogram
+from superbody.edge.colour import HIST_BINS, bhattacharyya, bhattacharyya_matrix, hs_histogram
 
 
 def _patch(h: int, s: int, v: int, noise: float = 0.0, seed: int = 0) -> np.ndarray:

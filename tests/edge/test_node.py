@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 import zenoh
 
-from edge import transport, wire
-from edge.simulator import SimCamera, World
-from edge.site import load_site
+from superbody.edge import transport, wire
+from superbody.edge.simulator import SimCamera, World
+from superbody.edge.site import load_site
 from tests.conftest import LAB_SITE, free_port
 
 SITE = str(LAB_SITE)
@@ -143,8 +143,8 @@ def test_a_frame_that_cannot_be_encoded_is_skipped_not_fatal(listener):
     """A source that produces an invalid observation: the node logs it, skips it and goes on."""
     import numpy as np
 
-    from edge.node import run_node
-    from edge.observation import Observation, PersonView
+    from superbody.edge.node import run_node
+    from superbody.edge.observation import Observation, PersonView
 
     site = load_site(SITE)
     good = SimCamera(World(site, 1, seed=0), "nw")

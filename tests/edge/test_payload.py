@@ -9,7 +9,7 @@ from typing import Any, Callable
 import numpy as np
 import pytest
 
-from edge.payload import (
+from superbody.edge.payload import (
     MAX_INT63,
     REASONS,
     ROOT,

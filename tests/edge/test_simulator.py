@@ -5,11 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from edge import body
-from edge.colour import bhattacharyya_matrix
-from edge.angles import wrap_angle
-from edge.simulator import NoiseModel, SimCamera, World, render_views, skeleton
-from edge.site import load_site
+from superbody.edge import body
+from superbody.edge.colour import bhattacharyya_matrix
+from superbody.edge.angles import wrap_angle
+from superbody.edge.simulator import NoiseModel, SimCamera, World, render_views, skeleton
+from superbody.edge.site import load_site
 
 from tests.conftest import LAB_SITE
 
@@ -98,7 +98,7 @@ def test_sim_camera_is_repeatable(site):
 
 def _one_person_at(site, x, y, yaw):
     world = World(site, 1, seed=0)
-    from edge.simulator import PersonState
+    from superbody.edge.simulator import PersonState
     return [PersonState(x, y, yaw, skeleton(x, y, yaw, 0.0, 0.0))], [world.people[0].appearance]
 
 
@@ -118,7 +118,7 @@ def test_noise_model(site, noise, check):
     if check == "swapped":
         (k, v), = views
         ls, rs = v.keypoints[body.LEFT_SHOULDER], v.keypoints[body.RIGHT_SHOULDER]
-        from edge.camera import project
+        from superbody.edge.camera import project
         uv, _ = project(states[0].joints, cam)
         assert np.allclose(ls[:2], uv[body.RIGHT_SHOULDER]) and np.allclose(rs[:2], uv[body.LEFT_SHOULDER])
     elif check == "spurious":
@@ -175,7 +175,7 @@ def test_people_do_not_walk_through_each_other(site_path, people, seed):
 
 def test_every_simulated_frame_encodes(site):
     """Pixel noise near the image border once produced inverted boxes the encoder refused."""
-    from edge import wire
+    from superbody.edge import wire
     world = World(site, 5, seed=7)
     for cam_id in site.camera_ids:
         cam = SimCamera(world, cam_id)

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from edge.site import SiteError, dump_site, load_site, parse_site
+from superbody.edge.site import SiteError, dump_site, load_site, parse_site
 
 ROOT = Path(__file__).resolve().parents[2]
 LAB = ROOT / "deploy" / "sites" / "lab-example.toml"

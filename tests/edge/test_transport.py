@@ -2,7 +2,7 @@
 
 import pytest
 
-from edge.transport import camera_from_key, observation_key, people_key, session_config
+from superbody.edge.transport import camera_from_key, observation_key, people_key, session_config
 
 
 @pytest.mark.parametrize(

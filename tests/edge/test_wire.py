@@ -15,10 +15,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from edge.body import NUM_KEYPOINTS
-from edge.colour import HIST_BINS
-from edge.observation import Observation, PersonView, empty_histogram, empty_keypoints
-from edge.wire import (
+from superbody.edge.body import NUM_KEYPOINTS
+from superbody.edge.colour import HIST_BINS
+from superbody.edge.observation import Observation, PersonView, empty_histogram, empty_keypoints
+from superbody.edge.wire import (
     ENCODING,
     MAX_PAYLOAD_BYTES,
     MAX_PEOPLE,

@@ -8,12 +8,12 @@ import math
 import numpy as np
 import pytest
 
-from edge import wire
-from edge.angles import wrap_angle
-from edge.simulator import SimCamera, World
-from edge.site import load_site
-from host.aggregator import Aggregator, HostConfig, confidence
-from host.analytic import AnalyticEstimator
+from superbody.edge import wire
+from superbody.edge.angles import wrap_angle
+from superbody.edge.simulator import SimCamera, World
+from superbody.edge.site import load_site
+from superbody.host.aggregator import Aggregator, HostConfig, confidence
+from superbody.host.analytic import AnalyticEstimator
 from tests.conftest import WTF_SITE
 
 T0 = 1_700_000_000 * 10**9
@@ -111,7 +111,7 @@ def test_late_frames_are_counted(site):
 
 
 def test_confidence_grows_with_what_was_seen():
-    from edge.observation import PersonView
+    from superbody.edge.observation import PersonView
     kp = np.full((17, 3), np.nan, np.float32)
     kp[:5] = [100, 100, 0.8]
     few = PersonView(kp, np.zeros(4, np.float32), np.zeros((16, 8), np.float32))

@@ -5,11 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from edge.angles import wrap_angle
-from edge.simulator import NoiseModel, PersonState, World, render_views, skeleton
-from edge.site import load_site
-from host.analytic import AnalyticEstimator, joints_3d, triangulate
-from models.wtf import load_wtf
+from superbody.edge.angles import wrap_angle
+from superbody.edge.simulator import NoiseModel, PersonState, World, render_views, skeleton
+from superbody.edge.site import load_site
+from superbody.host.analytic import AnalyticEstimator, joints_3d, triangulate
+from superbody.models.wtf import load_wtf
 from tests.conftest import WTF_SITE
 
 

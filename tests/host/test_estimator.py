@@ -11,10 +11,10 @@ import pytest
 torch = pytest.importorskip("torch")
 pytest.importorskip("onnx")
 
-from edge.observation import PersonView  # noqa: E402
-from edge.site import Site, parse_site  # noqa: E402
-from host.estimator import Estimator, ModelMismatchError, OnnxEstimator, decode_output  # noqa: E402
-from host.graph import GraphSpec, build_batch  # noqa: E402
+from superbody.edge.observation import PersonView  # noqa: E402
+from superbody.edge.site import Site, parse_site  # noqa: E402
+from superbody.host.estimator import Estimator, ModelMismatchError, OnnxEstimator, decode_output  # noqa: E402
+from superbody.host.graph import GraphSpec, build_batch  # noqa: E402
 
 
 def make_site(ids=("1", "2", "3"), name: str = "room", shift: float = 0.0) -> Site:
@@ -50,9 +50,9 @@ def people(n: int, seed: int = 0, cameras=("1", "2", "3")) -> list[dict[str, Per
 @pytest.fixture(scope="module")
 def models(tmp_path_factory):
     """Tiny exported models: GAT "site" and RGCN "rays"; with their PyTorch originals."""
-    from host.graph import floor_centre
-    from models.export import export_onnx
-    from models.nets import build_model
+    from superbody.host.graph import floor_centre
+    from superbody.models.export import export_onnx
+    from superbody.models.nets import build_model
 
     out = {}
     d = tmp_path_factory.mktemp("models")

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from edge.angles import wrap_angle
-from host.filter import FilterConfig, PoseFilter, predict, update
+from superbody.edge.angles import wrap_angle
+from superbody.host.filter import FilterConfig, PoseFilter, predict, update
 
 S = 1_000_000_000  # ns per second
 DEG = math.pi / 180

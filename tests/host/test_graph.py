@@ -9,11 +9,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from edge.body import INDEX, KEYPOINTS, MIRROR, NUM_KEYPOINTS, PARENT
-from edge.camera import pixel_to_ray
-from edge.observation import PersonView
-from edge.site import Site, parse_site
-from host.graph import (
+from superbody.edge.body import INDEX, KEYPOINTS, MIRROR, NUM_KEYPOINTS, PARENT
+from superbody.edge.camera import pixel_to_ray
+from superbody.edge.observation import PersonView
+from superbody.edge.site import Site, parse_site
+from superbody.host.graph import (
     BODY_TYPE,
     NUM_RELATIONS,
     REL_BODY_TO_JOINT,
@@ -446,9 +446,9 @@ def test_unknown_feature_group():
 
 
 def test_adjacency_is_the_template_masked_by_present_nodes():
-    from edge.site import load_site
-    from host.graph import adjacency_template
-    from models.simdata import SimDataConfig, generate
+    from superbody.edge.site import load_site
+    from superbody.host.graph import adjacency_template
+    from superbody.models.simdata import SimDataConfig, generate
     from tests.conftest import WTF_SITE
 
     site = load_site(WTF_SITE)

@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from edge.body import INDEX, NUM_KEYPOINTS, TYPICAL_HEIGHT_M
-from edge.camera import Camera, look_at_rotation, project
-from edge.observation import PersonView, empty_histogram
-from host.ground import LEVELS, ground_point, ground_points
+from superbody.edge.body import INDEX, NUM_KEYPOINTS, TYPICAL_HEIGHT_M
+from superbody.edge.camera import Camera, look_at_rotation, project
+from superbody.edge.observation import PersonView, empty_histogram
+from superbody.host.ground import LEVELS, ground_point, ground_points
 
 ANKLES = (INDEX["left_ankle"], INDEX["right_ankle"])
 HIPS = (INDEX["left_hip"], INDEX["right_hip"])

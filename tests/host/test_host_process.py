@@ -9,11 +9,11 @@ import time
 import pytest
 import zenoh
 
-from edge import transport, wire
-from edge.simulator import SimCamera, World
-from edge.site import load_site
-from host import pose as pose_msg
-from host.demo import DemoConfig, run_demo
+from superbody.edge import transport, wire
+from superbody.edge.simulator import SimCamera, World
+from superbody.edge.site import load_site
+from superbody.host import pose as pose_msg
+from superbody.host.demo import DemoConfig, run_demo
 from tests.conftest import WTF_SITE, free_port
 
 SITE = str(WTF_SITE)

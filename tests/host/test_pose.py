@@ -15,7 +15,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from host.pose import (
+from superbody.host.pose import (
     ENCODING,
     MAX_CAMERAS,
     MAX_PAYLOAD_BYTES,

@@ -15,8 +15,8 @@ import serial
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from host.pose import PersonPose, PoseArray, decode
-from host.serial_link import (
+from superbody.host.pose import PersonPose, PoseArray, decode
+from superbody.host.serial_link import (
     MAX_FRAME_BYTES,
     MAX_FRAME_PEOPLE,
     PERSON_BYTES,

@@ -14,12 +14,12 @@ import cv2
 import numpy as np
 import pytest
 
-from edge.body import NUM_KEYPOINTS, TYPICAL_HEIGHT_M
-from edge.camera import Camera, look_at_rotation, project
-from edge.colour import bhattacharyya, hs_histogram
-from edge.observation import Observation, PersonView, empty_histogram
-from edge.site import Site
-from host.tracker import Tracker, TrackerConfig, assign, median_colour_distance
+from superbody.edge.body import NUM_KEYPOINTS, TYPICAL_HEIGHT_M
+from superbody.edge.camera import Camera, look_at_rotation, project
+from superbody.edge.colour import bhattacharyya, hs_histogram
+from superbody.edge.observation import Observation, PersonView, empty_histogram
+from superbody.edge.site import Site
+from superbody.host.tracker import Tracker, TrackerConfig, assign, median_colour_distance
 
 S = 1_000_000_000  # ns per second
 T0 = 1_700_000_000 * S  # a realistic UNIX time

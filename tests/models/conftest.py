@@ -2,7 +2,7 @@
 
 import pytest
 
-from models.wtf import RawSample, load_wtf_raw
+from superbody.models.wtf import RawSample, load_wtf_raw
 
 
 @pytest.fixture(scope="module")

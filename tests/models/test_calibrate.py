@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from edge.camera import Camera, look_at_rotation, project
-from edge.site import load_site
-from models.calibrate import (
+from superbody.edge.camera import Camera, look_at_rotation, project
+from superbody.edge.site import load_site
+from superbody.models.calibrate import (
     calibrate_dataset,
     dataset_pairs,
     decompose_projection,
@@ -125,7 +125,7 @@ def test_floor_rectangle(xy, expected):
 
 def _superbody() -> list[str]:
     exe = shutil.which("superbody", path=str(Path(sys.executable).parent))
-    return [exe] if exe else [sys.executable, "-m", "edge.cli"]
+    return [exe] if exe else [sys.executable, "-m", "superbody.edge.cli"]
 
 
 def test_cli_calibrates_dev_json(tmp_path, raw):
@@ -178,7 +178,7 @@ def test_cli_missing_file_is_one_line_and_exit_2(tmp_path):
     ],
 )
 def test_cli_bad_input_in_process(tmp_path, capsys, raw, content, extra, expected):
-    from edge.cli import main
+    from superbody.edge.cli import main
 
     path = tmp_path / "in.json"
     if content is None:

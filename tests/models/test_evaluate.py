@@ -11,11 +11,11 @@ import sys
 import numpy as np
 import pytest
 
-from edge.angles import wrap_angle
-from edge.site import load_site
-from host.analytic import AnalyticEstimator
-from host.graph import GraphSpec, floor_centre
-from models.evaluate import (
+from superbody.edge.angles import wrap_angle
+from superbody.edge.site import load_site
+from superbody.host.analytic import AnalyticEstimator
+from superbody.host.graph import GraphSpec, floor_centre
+from superbody.models.evaluate import (
     PREDICTIONS_HEADER,
     evaluate,
     format_table,
@@ -26,7 +26,7 @@ from models.evaluate import (
     score,
     write_predictions_csv,
 )
-from models.wtf import TRUTH_OFFSET_M, load_wtf, truth_to_torso
+from superbody.models.wtf import TRUTH_OFFSET_M, load_wtf, truth_to_torso
 from tests.conftest import LAB_SITE, ROOT, WTF_SITE
 
 SITE = load_site(WTF_SITE)
@@ -47,8 +47,8 @@ def models(tmp_path_factory):
     """Untrained ONNX models: one for the wtf-apartment site, one for another site."""
     pytest.importorskip("torch")
     pytest.importorskip("onnx")
-    from models.export import export_onnx
-    from models.nets import build_model
+    from superbody.models.export import export_onnx
+    from superbody.models.nets import build_model
 
     out = tmp_path_factory.mktemp("models")
     paths = {}
@@ -209,7 +209,7 @@ def test_predictions_csv_is_in_the_dataset_frame(samples, dev_json, tmp_path, of
 
 def test_plots_are_written(samples, tmp_path):
     pytest.importorskip("matplotlib")
-    from models.plots import PLOT_FILES, write_plots
+    from superbody.models.plots import PLOT_FILES, write_plots
 
     preds = {"analytic": predict(samples, AnalyticEstimator(SITE)), "blind": predict(samples, BlindEstimator(samples))}
     paths = write_plots(tmp_path / "plots", samples, preds, TRUTH_OFFSET_M)
@@ -222,7 +222,7 @@ def test_plots_are_written(samples, tmp_path):
 
 
 def _eval(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "edge.cli", "eval", *args], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    return subprocess.run([sys.executable, "-m", "superbody.edge.cli", "eval", *args], cwd=ROOT, capture_output=True, text=True, timeout=120)
 
 
 def test_cli_on_dev_json(dev_json, models, tmp_path):
@@ -273,7 +273,7 @@ def test_cli_missing_dataset_exits_2(tmp_path, models):
     ],
 )
 def test_cli_bad_input_is_one_line_exit_2(case, expected, dev_json, models, tmp_path, capsys):
-    from edge.cli import main
+    from superbody.edge.cli import main
 
     dataset, model, extra = dev_json, models["wtf"], []
     if case == "invalid_json":

@@ -11,13 +11,13 @@ torch = pytest.importorskip("torch")
 onnx = pytest.importorskip("onnx")
 ort = pytest.importorskip("onnxruntime")
 
-from edge.body import KEYPOINTS, NUM_KEYPOINTS, TYPICAL_HEIGHT_M  # noqa: E402
-from edge.camera import project, world_to_camera  # noqa: E402
-from edge.observation import PersonView  # noqa: E402
-from edge.site import Site, parse_site  # noqa: E402
-from host.graph import GraphBatch, GraphSpec, build_batch, floor_centre  # noqa: E402
-from models.export import KEEP_FP32, export_onnx, quantize_int8, read_metadata  # noqa: E402
-from models.nets import ARCHS, build_model  # noqa: E402
+from superbody.edge.body import KEYPOINTS, NUM_KEYPOINTS, TYPICAL_HEIGHT_M  # noqa: E402
+from superbody.edge.camera import project, world_to_camera  # noqa: E402
+from superbody.edge.observation import PersonView  # noqa: E402
+from superbody.edge.site import Site, parse_site  # noqa: E402
+from superbody.host.graph import GraphBatch, GraphSpec, build_batch, floor_centre  # noqa: E402
+from superbody.models.export import KEEP_FP32, export_onnx, quantize_int8, read_metadata  # noqa: E402
+from superbody.models.nets import ARCHS, build_model  # noqa: E402
 
 # fp32 ONNX vs PyTorch: max abs difference of the pose (metres, sin, cos).
 FP32_ATOL = 1e-4

@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from edge.camera import project
-from edge.site import load_site
-from models.simdata import SimDataConfig, generate, load_samples, random_site, save_samples
+from superbody.edge.camera import project
+from superbody.edge.site import load_site
+from superbody.models.simdata import SimDataConfig, generate, load_samples, random_site, save_samples
 from tests.conftest import WTF_SITE
 
 

@@ -2,8 +2,8 @@
 
 import pytest
 
-from models.simstats import simulate, statistics
-from models.wtf import load_wtf
+from superbody.models.simstats import simulate, statistics
+from superbody.models.wtf import load_wtf
 from tests.conftest import WTF_SITE
 
 
