@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 
 from superbody.edge.body import INDEX
 from superbody.edge.camera import Camera, project
+from superbody.edge.floor import visible_floor
 from superbody.edge.site import Site
 from superbody.models.wtf import CAMERA_IDS, IMAGE_HEIGHT, IMAGE_WIDTH, RawSample
 
@@ -268,18 +269,22 @@ def floor_rectangle(xy: NDArray, margin: float = 0.5, step: float = 0.1) -> tupl
 
 
 def calibrate_dataset(
-    raw: Sequence[RawSample], *, name: str = "wtf-apartment", fps: float = 15.0, refine: bool = True
+    raw: Sequence[RawSample], *, name: str = "wtf-apartment", fps: float = 15.0, refine: bool = True,
+    floor_range_m: float = 5.0,
 ) -> tuple[Site, dict[str, CameraFit]]:
     """The site of a WheresTheFellow recording: one camera per dataset camera, and the floor.
 
-    The floor is the bounding rectangle of every ground-truth position and ankle joint plus
-    0.5 m, rounded outward to 0.1 m; there are no obstacles (the data does not show them).
+    The floor is the part of the room the recovered cameras see (``edge.floor.visible_floor``:
+    a standing person's hips or shoulders in some camera's image within ``floor_range_m``, in
+    front of every camera's wall), not where this recording walked; there are no obstacles
+    (the data does not show them).
 
     Args:
         raw: the samples from ``models.wtf.load_wtf_raw``.
         name: site name.
         fps: publishing rate written for every camera.
         refine: refine each camera after the DLT.
+        floor_range_m: a camera's useful floor range for the floor polygon.
 
     Returns:
         ``(site, fits)``: the site and each camera's fit, by camera id.
@@ -290,9 +295,7 @@ def calibrate_dataset(
     fits = {}
     for cid, (points, pixels) in dataset_pairs(raw).items():
         fits[cid] = fit_camera(cid, points, pixels, fps=fps, refine=refine)
-    floor_xy = [v.truth[:2][None] for s in raw for v in s.views]
-    floor_xy += [v.joints[list(_ANKLES), :2] for s in raw for v in s.views]
-    xy = np.concatenate(floor_xy)
-    xy = xy[~np.isnan(xy).any(axis=1)]
-    site = Site(name=name, cameras=tuple(f.camera for f in fits.values()), floor=floor_rectangle(xy))
+    cameras = tuple(f.camera for f in fits.values())
+    # The room the cameras see, never the path this recording happened to walk.
+    site = Site(name=name, cameras=cameras, floor=visible_floor(cameras, max_range_m=floor_range_m))
     return site, fits

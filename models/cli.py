@@ -83,8 +83,10 @@ def _calibration_header(args: argparse.Namespace, fits: dict, errors: dict[str, 
         )
     lines += _FPS_NOTE.format(fps=args.fps).splitlines()
     lines += [
-        "floor: bounding rectangle of every ground-truth position and ankle joint, plus 0.5 m,",
-        "rounded outward to 0.1 m. No obstacles: the data does not show the furniture.",
+        "floor: the room the cameras see, not the recording's path (edge/floor.py): floor points where",
+        "a standing person's hips (0.9 m) or shoulders (1.4 m) fall inside some camera's image within",
+        "5 m of it, in front of every camera's wall (0.3 m margin), traced on a 5 cm grid and simplified.",
+        "No obstacles: the data does not show the furniture.",
     ]
     return "\n".join(lines)
 

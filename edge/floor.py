@@ -1,0 +1,136 @@
+"""The floor a site's cameras see: where people can be, as the cameras see it.
+
+A site's floor polygon is the room, never the path of one recording: models are trained and
+checked over all of it. For a site recovered from cameras alone (``superbody calibrate
+from-dataset``, or any site without a hand-drawn floor) it is derived here:
+
+1. a floor point counts as *seen* by a camera when a person standing there has part of their
+   torso in the image: the point above it at hip or at shoulder height (0.9 m, 1.4 m) projects
+   inside the image (less a small border), in front of the camera, within ``max_range_m`` on
+   the floor (a detector finds a person from the head and shoulders, or the hips and legs);
+2. the room the cameras stand in: every camera hangs on a wall and looks into the room, so the
+   room lies in front of each camera, beyond ``wall_margin_m`` along its horizontal viewing
+   direction (a half-plane per camera);
+3. the floor is the largest region of points seen by at least one camera and inside the room,
+   traced on a ``cell_m`` grid and simplified to a polygon (counter-clockwise).
+
+``views_at`` counts how many cameras see each of a set of floor points, for coverage maps
+and for sampling training positions by camera count.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from superbody.edge.camera import Camera, project
+
+__all__ = ["TORSO_HEIGHTS_M", "seen_by", "views_at", "in_front", "visible_floor", "point_in_polygon"]
+
+TORSO_HEIGHTS_M = (0.9, 1.4)  # hips and shoulders of a standing adult (edge.body's typical heights)
+
+
+def seen_by(cam: Camera, xy: NDArray, max_range_m: float = 5.0, border: float = 0.02) -> NDArray[np.bool_]:
+    """Which floor points a camera sees part of a standing person's torso at (hips or shoulders).
+
+    Args:
+        cam: the camera.
+        xy: (N, 2) floor points, metres.
+        max_range_m: farthest floor distance from the camera's foot point that counts.
+        border: image border left out, as a fraction of the width and height.
+
+    Returns:
+        (N,) bool.
+    """
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    near = np.hypot(xy[:, 0] - cam.t[0], xy[:, 1] - cam.t[1]) <= max_range_m
+    bu, bv = border * cam.width, border * cam.height
+    seen = np.zeros(len(xy), bool)
+    for h in TORSO_HEIGHTS_M:
+        uv, z = project(np.column_stack([xy, np.full(len(xy), h)]), cam)
+        seen |= (z > 0.1) & (uv[:, 0] >= bu) & (uv[:, 0] <= cam.width - bu) & (uv[:, 1] >= bv) & (uv[:, 1] <= cam.height - bv)
+    return near & seen
+
+
+def views_at(cameras: Sequence[Camera], xy: NDArray, max_range_m: float = 5.0) -> NDArray[np.int64]:
+    """(N,) how many of the cameras see a person standing at each floor point (N, 2)."""
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    return np.sum([seen_by(c, xy, max_range_m) for c in cameras], axis=0).astype(np.int64) if cameras else np.zeros(len(xy), np.int64)
+
+
+def in_front(cameras: Sequence[Camera], xy: NDArray, wall_margin_m: float = 0.3) -> NDArray[np.bool_]:
+    """(N,) floor points in front of every camera's wall (the room the cameras stand in).
+
+    A camera looking straight down has no horizontal direction and clips nothing.
+    """
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    ok = np.ones(len(xy), bool)
+    for cam in cameras:
+        d = cam.R[:2, 2]  # the optical axis (camera z) on the floor
+        n = np.linalg.norm(d)
+        if n < 0.2:
+            continue
+        ok &= (xy - cam.t[:2]) @ (d / n) >= wall_margin_m
+    return ok
+
+
+def visible_floor(
+    cameras: Sequence[Camera],
+    max_range_m: float = 5.0,
+    wall_margin_m: float = 0.3,
+    cell_m: float = 0.05,
+    simplify_m: float = 0.05,
+) -> tuple[tuple[float, float], ...]:
+    """The floor polygon the cameras see (see the module docstring).
+
+    Args:
+        cameras: the site's cameras (at least one).
+        max_range_m: a camera's useful floor range.
+        wall_margin_m: how far in front of a camera's wall a person can stand.
+        cell_m: grid resolution.
+        simplify_m: largest distance of the polygon from the traced region's outline.
+
+    Returns:
+        Vertices (x, y) in metres, counter-clockwise, rounded to 1 cm.
+
+    Raises:
+        ValueError: no camera sees any of the floor in front of the cameras.
+    """
+    import cv2
+
+    if not cameras:
+        raise ValueError("visible_floor: no cameras")
+    centres = np.array([c.t[:2] for c in cameras])
+    lo = centres.min(0) - max_range_m
+    hi = centres.max(0) + max_range_m
+    nx, ny = (np.ceil((hi - lo) / cell_m)).astype(int) + 1
+    gx, gy = np.meshgrid(lo[0] + cell_m * np.arange(nx), lo[1] + cell_m * np.arange(ny))  # (ny, nx)
+    xy = np.column_stack([gx.ravel(), gy.ravel()])
+    ok = (views_at(cameras, xy, max_range_m) > 0) & in_front(cameras, xy, wall_margin_m)
+    mask = ok.reshape(ny, nx).astype(np.uint8)
+    if not mask.any():
+        raise ValueError("visible_floor: the cameras see no floor in front of them (check their poses)")
+    # The largest connected region, its holes filled: a person can cross a small blind spot.
+    contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    outline = max(contours, key=cv2.contourArea)
+    poly = cv2.approxPolyDP(outline, simplify_m / cell_m, True)[:, 0, :].astype(np.float64)  # (V, 2) grid (col, row)
+    pts = lo + poly * cell_m
+    area2 = np.sum(pts[:, 0] * np.roll(pts[:, 1], -1) - np.roll(pts[:, 0], -1) * pts[:, 1])
+    if area2 < 0:
+        pts = pts[::-1]
+    return tuple((round(float(x), 2), round(float(y), 2)) for x, y in pts)
+
+
+def point_in_polygon(xy: NDArray, polygon: Sequence[Sequence[float]]) -> NDArray[np.bool_]:
+    """(N,) whether each point (N, 2) is inside the polygon (even-odd rule)."""
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    p = np.asarray(polygon, dtype=np.float64)
+    x, y = xy[:, :1], xy[:, 1:]
+    x0, y0 = p[:, 0], p[:, 1]
+    x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
+    crosses = (y0 > y) != (y1 > y)  # (N, V)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xc = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
+    return (np.sum(crosses & (x < xc), axis=1) % 2) == 1
