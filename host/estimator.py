@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import logging
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Final, Mapping, Protocol, Sequence, runtime_checkable
 
@@ -31,6 +32,8 @@ from superbody.host.graph import GraphSpec, Variant, build_batch, floor_centre
 
 __all__ = [
     "Estimator",
+    "Estimates",
+    "estimate_detailed",
     "OnnxEstimator",
     "ModelMismatchError",
     "decode_output",
@@ -42,11 +45,15 @@ __all__ = [
     "POSE_FRAMES",
     "INPUT_NAMES",
     "OUTPUT_NAME",
+    "STD_OUTPUT_NAME",
+    "META_STD_SCALE",
 ]
 
 # The exported models' interface and metadata keys (written by models/export.py).
 INPUT_NAMES: Final[tuple[str, ...]] = ("x", "adj", "mask")
 OUTPUT_NAME: Final[str] = "pose"
+STD_OUTPUT_NAME: Final[str] = "pose_std"  # optional (B, 3): the network's 1-sigma of x, y (m) and yaw (rad)
+META_STD_SCALE: Final[str] = "pose.std_scale"  # JSON [kx, ky, kyaw]: calibration of pose_std on held-out real data
 META_POSE_FRAME: Final[str] = "pose.frame"  # "world" | "floor_centre"
 META_POSE_SCALE: Final[str] = "pose.scale"  # metres per unit of the network's raw output (informative)
 META_POSE_ORIGIN: Final[str] = "pose.origin"  # JSON [x, y]: origin of the raw output (informative)
@@ -55,6 +62,31 @@ META_TRAIN_CONFIG: Final[str] = "train.config"  # JSON: the training run's confi
 POSE_FRAMES: Final[tuple[str, ...]] = ("world", "floor_centre")
 
 log = logging.getLogger("superbody.host")
+
+
+@dataclass(frozen=True, eq=False)
+class Estimates:
+    """What an estimator says about a batch of people.
+
+    Attributes:
+        pose: (B, 3) x, y (m), yaw (rad, (-pi, pi]); NaN rows where nothing could be estimated.
+        std: (B, 3) 1-sigma of each (m, m, rad); NaN where the estimator gives none.
+        source: per person, which estimator produced the pose ("onnx", "analytic", "hybrid").
+    """
+
+    pose: NDArray[np.float64]
+    std: NDArray[np.float64]
+    source: tuple[str, ...]
+
+
+def estimate_detailed(estimator: "Estimator", view_sets: Sequence[Mapping[str, PersonView]], source: str) -> Estimates:
+    """``estimator.estimate_detailed`` when it has one; otherwise its poses, no sigmas, and
+    ``source`` for every person."""
+    detailed = getattr(estimator, "estimate_detailed", None)
+    if detailed is not None:
+        return detailed(view_sets)
+    pose = np.asarray(estimator.estimate(view_sets), dtype=np.float64).reshape(-1, 3)
+    return Estimates(pose, np.full(pose.shape, np.nan), (source,) * len(pose))
 
 
 class ModelMismatchError(ValueError):
@@ -122,6 +154,14 @@ class OnnxEstimator:
         self._check(site, variant)
         self.origin = floor_centre(site) if self.frame == "floor_centre" else np.zeros(2)
         self._inputs = [i.name for i in self.session.get_inputs()]
+        self.has_std = STD_OUTPUT_NAME in [o.name for o in self.session.get_outputs()]
+        try:
+            scale = json.loads(self.metadata.get(META_STD_SCALE, "[1, 1, 1]"))
+            self.std_scale = np.asarray(scale, dtype=np.float64).reshape(3)
+            if not (np.all(np.isfinite(self.std_scale)) and np.all(self.std_scale > 0)):
+                raise ValueError
+        except (ValueError, TypeError):
+            raise ModelMismatchError(f"{self.path}: metadata {META_STD_SCALE} must be 3 positive numbers, got {self.metadata.get(META_STD_SCALE)!r}") from None
 
     def _check(self, site: Site, variant: Variant | None) -> None:
         spec, where = self.spec, str(self.path)
@@ -156,8 +196,8 @@ class OnnxEstimator:
                     f"{where}: input {name!r} has shape {inputs[name]}, the metadata's graph spec implies [batch, {', '.join(map(str, expected[name]))}]"
                 )
         outputs = [o.name for o in self.session.get_outputs()]
-        if outputs != [OUTPUT_NAME]:
-            raise ModelMismatchError(f"{where}: model outputs are {outputs}, expected [{OUTPUT_NAME!r}]")
+        if outputs not in ([OUTPUT_NAME], [OUTPUT_NAME, STD_OUTPUT_NAME]):
+            raise ModelMismatchError(f"{where}: model outputs are {outputs}, expected [{OUTPUT_NAME!r}] or [{OUTPUT_NAME!r}, {STD_OUTPUT_NAME!r}]")
 
     @property
     def config(self) -> dict:
@@ -176,8 +216,24 @@ class OnnxEstimator:
         Raises:
             ValueError: a view set is empty or names a camera the model does not know.
         """
+        return self.estimate_with_std(view_sets)[0]
+
+    def estimate_detailed(self, view_sets: Sequence[Mapping[str, PersonView]]) -> Estimates:
+        """Poses, the network's calibrated sigmas, and the source "onnx" for every person."""
+        pose, std = self.estimate_with_std(view_sets)
+        return Estimates(pose, std, ("onnx",) * len(pose))
+
+    def estimate_with_std(self, view_sets: Sequence[Mapping[str, PersonView]]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Poses (B, 3) and their 1-sigma (B, 3) (x m, y m, yaw rad), in one onnxruntime call.
+
+        The sigma is the network's own (``pose_std``) times the calibration in the metadata
+        (``pose.std_scale``); NaN for a model without an uncertainty output.
+        """
         if len(view_sets) == 0:
-            return np.zeros((0, 3))
+            return np.zeros((0, 3)), np.zeros((0, 3))
         feeds = build_batch(view_sets, self.site, self.spec).feeds()
-        (pose,) = self.session.run([OUTPUT_NAME], {name: feeds[name] for name in self._inputs})
-        return decode_output(pose, self.origin)
+        names = [OUTPUT_NAME, STD_OUTPUT_NAME] if self.has_std else [OUTPUT_NAME]
+        outs = self.session.run(names, {name: feeds[name] for name in self._inputs})
+        pose = decode_output(outs[0], self.origin)
+        std = np.asarray(outs[1], np.float64) * self.std_scale if self.has_std else np.full((len(pose), 3), np.nan)
+        return pose, std

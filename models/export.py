@@ -5,7 +5,8 @@ The exported model (what ``host.estimator.OnnxEstimator`` runs)::
     inputs   x    (batch, N, F)     float32   node features      (host.graph.build_batch)
              adj  (batch, R, N, N)  float32   0/1 per relation
              mask (batch, N)        float32   1 = node present
-    output   pose (batch, 4)        float32   (x, y, sin yaw, cos yaw), x and y in metres
+    outputs  pose (batch, 4)        float32   (x, y, sin yaw, cos yaw), x and y in metres
+             pose_std (batch, 3)    float32   the network's own 1-sigma: x, y (m), yaw (rad)
 
 The network's normalised output is scaled back to metres inside the graph; ``pose[:, :2]`` is
 in the frame named by the metadata key ``pose.frame``: "world" for "site" models (the origin
@@ -45,6 +46,7 @@ from superbody.host.estimator import (
     META_POSE_SCALE,
     META_TRAIN_CONFIG,
     OUTPUT_NAME,
+    STD_OUTPUT_NAME,
 )
 from superbody.host.graph import GraphBatch, GraphSpec
 from superbody.models.nets import PoseNet
@@ -68,7 +70,8 @@ KEEP_FP32: dict[str, tuple[str, ...]] = {
 
 
 class _ExportedPose(nn.Module):
-    """The network plus its output denormalisation: normalised (B, 4) -> metres (B, 4)."""
+    """The network plus its output denormalisation: normalised (B, 7) -> pose in metres (B, 4)
+    and its 1-sigma (B, 3) (x, y metres, yaw radians)."""
 
     def __init__(self, net: PoseNet):
         super().__init__()
@@ -77,9 +80,13 @@ class _ExportedPose(nn.Module):
         ox, oy = net.origin if net.spec.variant == "site" else (0.0, 0.0)
         self.register_buffer("gain", torch.tensor([s, s, 1.0, 1.0]))
         self.register_buffer("offset", torch.tensor([ox, oy, 0.0, 0.0]))
+        self.register_buffer("std_gain", torch.tensor([s, s, 1.0]))
 
-    def forward(self, x: torch.Tensor, adj: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
-        return self.net(x, adj, mask) * self.gain + self.offset  # (B, 4)
+    def forward(self, x: torch.Tensor, adj: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        out = self.net(x, adj, mask)  # (B, 7)
+        pose = out[:, :4] * self.gain + self.offset  # (B, 4)
+        std = torch.exp(out[:, 4:7].clamp(-12.0, 4.0)) * self.std_gain  # (B, 3)
+        return pose, std
 
 
 def _metadata(model: PoseNet, spec: GraphSpec, config: Mapping) -> dict[str, str]:
@@ -145,7 +152,7 @@ def export_onnx(model: PoseNet, spec: GraphSpec, config: Mapping, path: str | Pa
         (torch.rand(B, spec.num_relations, spec.num_nodes, spec.num_nodes) > 0.5).float(),
         torch.ones(B, spec.num_nodes),
     )
-    batch_axis = {n: {0: "batch"} for n in (*INPUT_NAMES, OUTPUT_NAME)}
+    batch_axis = {n: {0: "batch"} for n in (*INPUT_NAMES, OUTPUT_NAME, STD_OUTPUT_NAME)}
     try:
         with torch.no_grad(), warnings.catch_warnings():
             # The TorchScript exporter is deprecated; the dynamo one needs onnxscript, which is
@@ -153,7 +160,7 @@ def export_onnx(model: PoseNet, spec: GraphSpec, config: Mapping, path: str | Pa
             warnings.simplefilter("ignore", DeprecationWarning)
             torch.onnx.export(
                 wrapper, example, str(path), dynamo=False, opset_version=opset,
-                input_names=list(INPUT_NAMES), output_names=[OUTPUT_NAME], dynamic_axes=batch_axis,
+                input_names=list(INPUT_NAMES), output_names=[OUTPUT_NAME, STD_OUTPUT_NAME], dynamic_axes=batch_axis,
                 do_constant_folding=True,
             )
     finally:
@@ -161,7 +168,8 @@ def export_onnx(model: PoseNet, spec: GraphSpec, config: Mapping, path: str | Pa
     proto = onnx.load(str(path))
     _declare_all_inputs(proto, spec)
     proto.producer_name = "superbody"
-    proto.doc_string = f"superbody {model.arch} pose network; output pose (batch, 4) = x, y (m, frame: metadata pose.frame), sin yaw, cos yaw"
+    proto.doc_string = (f"superbody {model.arch} pose network; output pose (batch, 4) = x, y (m, frame: metadata pose.frame), "
+                        "sin yaw, cos yaw; pose_std (batch, 3) = predicted 1-sigma of x, y (m) and yaw (rad)")
     _set_metadata(proto, _metadata(model, spec, config))
     onnx.checker.check_model(proto)
     onnx.save(proto, str(path))

@@ -4,7 +4,12 @@ Every model takes the tensors of ``host.graph.build_batch`` and returns the norm
 each person, read at the superbody node (node 0)::
 
     x    (B, N, F) node features       adj  (B, R, N, N) 0/1, adj[b, r, i, j]: edge j -> i
-    mask (B, N)    1 = node present    out  (B, 4) = ((x - ox)/s, (y - oy)/s, sin yaw, cos yaw)
+    mask (B, N)    1 = node present    out  (B, 7) = ((x - ox)/s, (y - oy)/s, sin yaw, cos yaw,
+                                                      log sigma_x/s, log sigma_y/s, log sigma_yaw)
+
+The last three outputs are the network's own uncertainty (a heteroscedastic Gaussian head for
+the position and a von Mises head for the yaw, trained by ``pose_nll``); the host's filter uses
+them as the measurement noise, so a poor single-view yaw moves a track less.
 
 Output normalisation: positions are metres relative to an origin (ox, oy), divided by the
 scale s (``DEFAULT_SCALE`` = 4 m, as the original code's x/4000 mm). The origin is the
@@ -34,6 +39,9 @@ from superbody.host.estimator import decode_output
 from superbody.host.graph import SLOT_SIZE, SUPERBODY, GraphSpec, floor_centre
 
 __all__ = [
+    "OUT_DIM",
+    "decode_std",
+    "pose_nll",
     "Arch",
     "ARCHS",
     "DEFAULT_SCALE",
@@ -56,6 +64,9 @@ DEFAULT_SCALE: Final[float] = 4.0
 # at all (an absent node) softmaxes to a uniform distribution instead of NaN.
 _NEG: Final[float] = -1e9
 
+# Outputs: the normalised pose (x, y, sin yaw, cos yaw) and its log 1-sigma (x, y, yaw).
+OUT_DIM: Final[int] = 7
+
 
 def pose_targets(truth: NDArray, origin: NDArray, scale: float) -> NDArray[np.float32]:
     """World poses (B, 3) (x, y, yaw) -> normalised targets (B, 4)."""
@@ -65,9 +76,36 @@ def pose_targets(truth: NDArray, origin: NDArray, scale: float) -> NDArray[np.fl
 
 
 def decode_pose(out: NDArray, origin: NDArray, scale: float) -> NDArray[np.float64]:
-    """Normalised outputs (B, 4) -> world poses (B, 3), yaw wrapped to (-pi, pi]."""
-    out = np.asarray(out, dtype=np.float64).reshape(-1, 4)
+    """Normalised outputs (B, 4 or OUT_DIM) -> world poses (B, 3), yaw wrapped to (-pi, pi]."""
+    out = np.asarray(out, dtype=np.float64)
+    out = out.reshape(len(out), -1)[:, :4]  # (B, 4) the pose; the rest is its uncertainty
     return decode_output(np.column_stack([out[:, :2] * scale, out[:, 2:]]), origin)
+
+
+def decode_std(out: NDArray, scale: float) -> NDArray[np.float64]:
+    """Normalised outputs (B, OUT_DIM) -> predicted 1-sigma (B, 3): x, y in metres, yaw in radians."""
+    s = np.exp(np.clip(np.asarray(out, dtype=np.float64)[:, 4:7], -12.0, 4.0))  # (B, 3)
+    return s * [scale, scale, 1.0]
+
+
+def pose_nll(out: "torch.Tensor", y: "torch.Tensor") -> "torch.Tensor":
+    """(B,) negative log-likelihood of the targets under the predicted uncertainty.
+
+    Position: a Gaussian per axis with log-sigma ``out[:, 4:6]``; yaw: a von Mises with
+    concentration kappa = 1 / sigma^2, log-sigma ``out[:, 6]``. The means are detached: the
+    uncertainty head learns how wrong the pose is, without pulling the pose toward easy cases.
+
+        NLL_xy  = 0.5 (d / sigma)^2 + log sigma
+        NLL_yaw = kappa (1 - cos d) + log I0e(kappa)    (= -kappa cos d + log I0(kappa))
+    """
+    mean = out[:, :4].detach()
+    log_s = out[:, 4:7].clamp(-8.0, 4.0)  # (B, 3)
+    d_xy = mean[:, :2] - y[:, :2]  # (B, 2)
+    nll_xy = (0.5 * (d_xy / log_s[:, :2].exp()) ** 2 + log_s[:, :2]).sum(1)
+    d_yaw = torch.atan2(mean[:, 2], mean[:, 3]) - torch.atan2(y[:, 2], y[:, 3])  # (B,)
+    kappa = torch.exp(-2.0 * log_s[:, 2])
+    nll_yaw = kappa * (1.0 - torch.cos(d_yaw)) + torch.log(torch.special.i0e(kappa))
+    return nll_xy + nll_yaw
 
 
 class PoseNet(nn.Module):
@@ -83,6 +121,15 @@ class PoseNet(nn.Module):
         self.scale = float(scale)
         self.origin = (float(origin[0]), float(origin[1]))
         self.hparams: dict[str, object] = {}
+
+    def _with_std(self, dim: int, hidden: int) -> None:
+        """Add the uncertainty head on the ``dim``-wide pose embedding."""
+        self.std_head = nn.Sequential(nn.Linear(dim, hidden), nn.ELU(), nn.Linear(hidden, 3))
+
+    def _outputs(self, z: torch.Tensor) -> torch.Tensor:
+        """(B, OUT_DIM) pose and log-sigma from the pose embedding z (B, D). The uncertainty head
+        reads a detached copy: learning how wrong the pose is must not change the pose."""
+        return torch.cat([self.head(z), self.std_head(z.detach())], dim=1)
 
     def config(self) -> dict[str, object]:
         """Architecture, hyper-parameters and output normalisation (JSON-able)."""
@@ -158,6 +205,7 @@ class GAT(PoseNet):
         self.embed = nn.Linear(spec.num_features, hidden)
         self.layers = nn.ModuleList(GATLayer(hidden, heads) for _ in range(layers))
         self.head = nn.Sequential(nn.Linear(hidden, hidden), nn.ELU(), nn.Linear(hidden, 4))
+        self._with_std(hidden, hidden)
 
     def forward(self, x: torch.Tensor, adj: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         m = mask.unsqueeze(-1)  # (B, N, 1)
@@ -165,7 +213,7 @@ class GAT(PoseNet):
         h = F.elu(self.embed(x)) * m  # (B, N, D)
         for layer in self.layers:
             h = (h + F.elu(layer(h, bias))) * m  # (B, N, D) absent nodes stay zero
-        return self.head(h[:, SUPERBODY])  # (B, 4)
+        return self._outputs(h[:, SUPERBODY])  # (B, OUT_DIM)
 
 
 # --------------------------------------------------------------------------------------------
@@ -219,6 +267,7 @@ class RGCN(PoseNet):
         self.embed = nn.Linear(spec.num_features, hidden)
         self.layers = nn.ModuleList(RGCNLayer(hidden, hidden, spec.num_relations, bases) for _ in range(layers))
         self.head = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, 4))
+        self._with_std(hidden, hidden)
 
     def forward(self, x: torch.Tensor, adj: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         m = mask.unsqueeze(-1)  # (B, N, 1)
@@ -227,7 +276,7 @@ class RGCN(PoseNet):
         h = F.relu(self.embed(x)) * m  # (B, N, D)
         for layer in self.layers:
             h = (h + F.relu(layer(h, A))) * m  # (B, N, D)
-        return self.head(h[:, SUPERBODY])  # (B, 4)
+        return self._outputs(h[:, SUPERBODY])  # (B, OUT_DIM)
 
 
 # --------------------------------------------------------------------------------------------
@@ -256,6 +305,7 @@ class MLP(PoseNet):
             nn.Linear(SLOT_SIZE * (F_ + 1), hidden), nn.ReLU(), nn.Linear(hidden, slot_dim), nn.ReLU()
         )
         self.head = nn.Sequential(nn.Linear(S * slot_dim, hidden), nn.ReLU(), nn.Linear(hidden, 4))
+        self._with_std(S * slot_dim, hidden)
 
     def forward(self, x: torch.Tensor, adj: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         S, F_ = self.spec.num_slots, self.spec.num_features
@@ -264,7 +314,7 @@ class MLP(PoseNet):
         ms = mask[:, 1:].reshape(-1, S, SLOT_SIZE)  # (B, S, 18)
         e = self.slot(torch.cat([xs, ms], dim=-1))  # (B, S, E)
         e = e * ms[:, :, :1]  # (B, S, E) empty slots (no body node) contribute nothing
-        return self.head(e.reshape(-1, S * self.slot_dim))  # (B, 4)
+        return self._outputs(e.reshape(-1, S * self.slot_dim))  # (B, OUT_DIM)
 
 
 # --------------------------------------------------------------------------------------------

@@ -64,6 +64,7 @@ class TrainConfig:
     random_sites: int = 0
     real: str | None = None
     real_exclude: tuple[int, int] | None = None
+    real_holdout: tuple[int, ...] = ()
     real_repeat: int = 20
     epochs: int = 40
     batch_size: int = 128
@@ -72,6 +73,7 @@ class TrainConfig:
     patience: int = 6
     val_fraction: float = 0.1
     yaw_weight: float = 1.0
+    nll_weight: float = 0.01
     seed: int = 0
     max_minutes: float = 15.0
     threads: int = 2
@@ -90,7 +92,7 @@ class TrainConfig:
             if not (isinstance(v, int) and lo <= v <= hi):
                 raise ValueError(f"{name} must be an integer in [{lo}, {hi}], got {v!r}")
         for name, lo, hi in (("lr", 1e-6, 1.0), ("weight_decay", 0.0, 1.0), ("val_fraction", 0.0, 0.5),
-                             ("yaw_weight", 0.0, 100.0), ("max_minutes", 0.01, 10_000.0)):
+                             ("yaw_weight", 0.0, 100.0), ("nll_weight", 0.0, 100.0), ("max_minutes", 0.01, 10_000.0)):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and lo <= v <= hi):
                 raise ValueError(f"{name} must be in [{lo}, {hi}], got {v!r}")
@@ -100,6 +102,7 @@ class TrainConfig:
     def to_json(self) -> dict:
         d = dataclasses.asdict(self)
         d["real_exclude"] = list(self.real_exclude) if self.real_exclude else None
+        d["real_holdout"] = list(self.real_holdout)
         return d
 
 
@@ -159,9 +162,10 @@ def _datasets(cfg: TrainConfig, site: Site, spec: GraphSpec, model, progress: bo
         from superbody.models.wtf import load_wtf, truth_to_torso
 
         real = load_wtf(cfg.real, site=site if cfg.use_3d else None)
+        drop = set(cfg.real_holdout)
         if cfg.real_exclude:
-            a, b = cfg.real_exclude
-            real = real[:a] + real[b:]
+            drop |= set(range(*cfg.real_exclude))
+        real = [s for i, s in enumerate(real) if i not in drop]
         real = [Sample(s.views, truth_to_torso(s.truth)[0], s.stamp_ns) for s in real]
         x, m, y = prepare(real, site, spec, model)
         parts.append((np.repeat(x, cfg.real_repeat, 0), np.repeat(m, cfg.real_repeat, 0), np.repeat(y, cfg.real_repeat, 0),
@@ -182,7 +186,7 @@ def train(cfg: TrainConfig, progress: bool = True) -> TrainResult:
     """Train a model as ``cfg`` says; returns it with its history (no files written)."""
     import torch
 
-    from superbody.models.nets import build_model
+    from superbody.models.nets import build_model, pose_nll
 
     torch.manual_seed(cfg.seed)
     torch.set_num_threads(cfg.threads)
@@ -227,7 +231,8 @@ def train(cfg: TrainConfig, progress: bool = True) -> TrainResult:
         bar = tqdm(range(steps_per_epoch), desc=f"epoch {epoch + 1}/{cfg.epochs}", unit="step", leave=False, disable=not progress)
         for s in bar:
             out, y = forward(perm[s * cfg.batch_size : (s + 1) * cfg.batch_size])
-            loss = (((out - y) ** 2) * w).mean()
+            # The pose's squared error, plus the uncertainty head's likelihood (means detached).
+            loss = (((out[:, :4] - y) ** 2) * w).mean() + pose_nll(out, y).mean() * cfg.nll_weight
             opt.zero_grad()
             loss.backward()
             opt.step()
@@ -236,7 +241,8 @@ def train(cfg: TrainConfig, progress: bool = True) -> TrainResult:
             if s % 20 == 0:
                 bar.set_postfix(loss=f"{total / (s + 1):.4f}")
         val_out, val_y = _predict(model, forward, val, cfg.batch_size)
-        val_loss = float(((((val_out - val_y) ** 2) * w.numpy()).mean())) if len(val) else total / steps_per_epoch
+        # Early stopping on the pose alone: the uncertainty must not choose the epoch.
+        val_loss = float(((((val_out[:, :4] - val_y) ** 2) * w.numpy()).mean())) if len(val) else total / steps_per_epoch
         row = {"epoch": epoch + 1, "train_loss": total / steps_per_epoch, "val_loss": val_loss, "minutes": (time.monotonic() - t0) / 60,
                **(_metrics(val_out, val_y, model.scale) if len(val) else {})}
         history.append(row)
@@ -274,7 +280,7 @@ def _predict(model, forward, idx: NDArray, batch: int) -> tuple[NDArray, NDArray
             ys.append(y.numpy())
     model.train()
     if not outs:
-        return np.zeros((0, 4), np.float32), np.zeros((0, 4), np.float32)
+        return np.zeros((0, OUT_DIM), np.float32), np.zeros((0, 4), np.float32)
     return np.concatenate(outs), np.concatenate(ys)
 
 

@@ -17,7 +17,7 @@ from superbody.edge.observation import PersonView  # noqa: E402
 from superbody.edge.site import Site, parse_site  # noqa: E402
 from superbody.host.graph import GraphBatch, GraphSpec, build_batch, floor_centre  # noqa: E402
 from superbody.models.export import KEEP_FP32, export_onnx, quantize_int8, read_metadata  # noqa: E402
-from superbody.models.nets import ARCHS, build_model  # noqa: E402
+from superbody.models.nets import ARCHS, build_model, decode_std  # noqa: E402
 
 # fp32 ONNX vs PyTorch: max abs difference of the pose (metres, sin, cos).
 FP32_ATOL = 1e-4
@@ -72,7 +72,14 @@ def torch_pose(model, g: GraphBatch) -> np.ndarray:
     with torch.no_grad():
         out = model(*(torch.from_numpy(a) for a in (g.x, g.adj, g.mask))).numpy().astype(np.float64)
     offset = model.origin if model.spec.variant == "site" else (0.0, 0.0)
-    return np.column_stack([out[:, :2] * model.scale + offset, out[:, 2:]])
+    return np.column_stack([out[:, :2] * model.scale + offset, out[:, 2:4]])
+
+
+def torch_std(model, g: GraphBatch) -> np.ndarray:
+    """What the exported pose_std must be: the predicted 1-sigma in metres and radians."""
+    with torch.no_grad():
+        out = model(*(torch.from_numpy(a) for a in (g.x, g.adj, g.mask))).numpy().astype(np.float64)
+    return decode_std(out, model.scale)
 
 
 def session(path) -> ort.InferenceSession:
@@ -102,13 +109,15 @@ def test_fp32_export_matches_pytorch(arch, spec_name, graphs, tmp_path):
     path = export_onnx(model, spec, {"lr": 1e-3, "epochs": 2}, tmp_path / f"{arch}.onnx")
     s = session(path)
     assert [i.name for i in s.get_inputs()] == ["x", "adj", "mask"]  # the MLP keeps its unused adj
-    assert [o.name for o in s.get_outputs()] == ["pose"]
+    assert [o.name for o in s.get_outputs()] == ["pose", "pose_std"]
     assert all(isinstance(i.shape[0], str) for i in s.get_inputs())  # dynamic batch axis
-    expected = torch_pose(model, g)
+    expected, expected_std = torch_pose(model, g), torch_std(model, g)
     for n in (1, 64):  # batch 1 and 64
-        (pose,) = s.run(["pose"], {k: v[:n] for k, v in g.feeds().items()})
-        assert pose.shape == (n, 4) and pose.dtype == np.float32
+        pose, std = s.run(["pose", "pose_std"], {k: v[:n] for k, v in g.feeds().items()})
+        assert pose.shape == (n, 4) and pose.dtype == np.float32 and std.shape == (n, 3)
         np.testing.assert_allclose(pose, expected[:n], atol=FP32_ATOL, rtol=0)
+        np.testing.assert_allclose(std, expected_std[:n], rtol=1e-4, atol=1e-6)
+        assert (std > 0).all()
     assert path.stat().st_size < 1_000_000
 
 

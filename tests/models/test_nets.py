@@ -11,6 +11,7 @@ from superbody.edge.observation import PersonView  # noqa: E402
 from superbody.edge.site import Site, parse_site  # noqa: E402
 from superbody.host.graph import NUM_RELATIONS, GraphSpec, build_batch, floor_centre  # noqa: E402
 from superbody.models.nets import (  # noqa: E402
+    OUT_DIM,
     ARCHS,
     GATLayer,
     RGCNLayer,
@@ -66,9 +67,9 @@ def test_output_shape_and_batch_independence(arch, spec_name):
     model = build_model(arch, spec).eval()
     x, adj, mask = random_batch(spec, 5)
     with torch.no_grad():
-        out = model(x, adj, mask)  # (5, 4)
+        out = model(x, adj, mask)  # (5, OUT_DIM)
         singles = torch.cat([model(x[i : i + 1], adj[i : i + 1], mask[i : i + 1]) for i in range(5)])
-    assert out.shape == (5, 4) and torch.isfinite(out).all()
+    assert out.shape == (5, OUT_DIM) and torch.isfinite(out).all()
     torch.testing.assert_close(out, singles, atol=1e-5, rtol=1e-5)
 
 
