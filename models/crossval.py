@@ -1,13 +1,21 @@
 """Blocked k-fold cross-validation of simulation + real training on a WheresTheFellow file.
 
-    superbody crossval --site deploy/sites/wtf-apartment.toml --real dev.json --init sim.pt --folds 5
+    superbody crossval --site deploy/sites/wtf-apartment.toml --real dev.json --init sim.pt --folds 5 [--split space]
 
-The file is split into ``folds`` contiguous time segments (consecutive samples are nearly the
-same picture, so random folds would leak). For each fold a model is trained on the simulated
-data plus the real samples of the other folds (starting from ``--init``, typically the
-simulation-only checkpoint: fine-tuning), and predicts the held-out fold. The held-out
-predictions of all folds together are scored like ``superbody eval`` (every real sample is
-predicted by a model that never saw it), with the analytic baseline beside them.
+Two ways to block the file into ``folds`` (random folds would leak: consecutive samples are
+nearly the same picture):
+
+- ``--split time``: contiguous time segments;
+- ``--split space``: regions of the floor (k-means on the true positions, seeded), and the
+  training side also loses every sample within ``--buffer`` metres of the held-out region.
+  This is the proxy for a recording that walks where this one did not.
+
+For each fold a model is trained on the simulated data plus the real samples of the other folds
+(starting from ``--init``, typically the simulation-only checkpoint: fine-tuning), and predicts
+the held-out fold. The held-out predictions of all folds together are scored like ``superbody
+eval`` (every real sample is predicted by a model that never saw it), with the analytic baseline
+beside them. ``--predictions-out F.npz`` keeps them (pose, predicted sigma, analytic pose, truth,
+camera count, fold) for calibrating the hybrid estimator (``superbody calibrate-hybrid``).
 """
 
 from __future__ import annotations
@@ -20,11 +28,14 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
 from superbody.edge.site import SiteError, load_site
 from superbody.models.train import TrainConfig, add_train_args, config_from_args, train
 
-__all__ = ["fold_ranges", "crossvalidate", "register"]
+__all__ = ["fold_ranges", "spatial_folds", "crossvalidate", "register", "SPLITS"]
+
+SPLITS = ("time", "space")
 
 log = logging.getLogger("superbody.crossval")
 
@@ -37,12 +48,44 @@ def fold_ranges(n: int, folds: int) -> list[tuple[int, int]]:
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
 
 
-def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = None, progress: bool = False) -> dict:
+def spatial_folds(xy: NDArray, folds: int, buffer_m: float = 0.3, seed: int = 0) -> list[tuple[NDArray[np.int64], NDArray[np.int64]]]:
+    """Floor regions as folds: k-means (k = ``folds``) on the positions (N, 2).
+
+    Returns:
+        Per fold ``(held_out, excluded)``: the indices of the region, and the indices the
+        training side must not see (the region plus every sample within ``buffer_m`` of it).
+    """
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    if not 2 <= folds <= len(xy):
+        raise ValueError(f"folds must be in [2, {len(xy)}] for {len(xy)} samples, got {folds}")
+    rng = np.random.default_rng(seed)
+    # k-means++ seeding then Lloyd iterations: plain, deterministic for a seed.
+    centres = [xy[rng.integers(len(xy))]]
+    for _ in range(folds - 1):
+        d2 = np.min([((xy - c) ** 2).sum(1) for c in centres], axis=0)
+        centres.append(xy[rng.choice(len(xy), p=d2 / d2.sum())])
+    C = np.array(centres)
+    for _ in range(100):
+        label = np.argmin(((xy[:, None] - C[None]) ** 2).sum(-1), axis=1)  # (N,)
+        new = np.array([xy[label == k].mean(0) if (label == k).any() else C[k] for k in range(folds)])
+        if np.allclose(new, C):
+            break
+        C = new
+    out = []
+    for k in range(folds):
+        held = np.flatnonzero(label == k)
+        d = np.sqrt(((xy[:, None] - xy[None, held]) ** 2).sum(-1)).min(1)  # distance to the region
+        out.append((held, np.flatnonzero(d <= buffer_m)))
+    return out
+
+
+def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = None, progress: bool = False,
+                  split: str = "time", buffer_m: float = 0.3) -> dict:
     """Train one model per fold and score the held-out predictions.
 
     Returns:
-        ``{"folds": [...], "reports": {"model": report, "analytic": report}}`` with reports as
-        ``models.evaluate.summarise`` gives them.
+        ``{"folds": [...], "reports": {"model": report, "analytic": report}, "predictions",
+        "std", "analytic", ...}`` with reports as ``models.evaluate.summarise`` gives them.
     """
     from superbody.host.analytic import AnalyticEstimator
     from superbody.models.evaluate import predict, score
@@ -52,19 +95,30 @@ def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = N
         raise ValueError("cross-validation needs real data (--real)")
     offset = TRUTH_OFFSET_M if truth_offset_m is None else truth_offset_m
     site = load_site(cfg.site)
+    if split not in SPLITS:
+        raise ValueError(f"unknown split {split!r}; valid splits: {', '.join(SPLITS)}")
     samples = load_wtf(cfg.real, site=site if cfg.use_3d else None)
+    if split == "time":
+        blocks = [(np.arange(a, b), np.arange(a, b)) for a, b in fold_ranges(len(samples), folds)]
+    else:
+        blocks = spatial_folds(np.array([s.truth[:2] for s in samples]), folds, buffer_m, seed=cfg.seed)
     pred = np.full((len(samples), 3), np.nan)
+    std = np.full((len(samples), 3), np.nan)
+    fold_of = np.zeros(len(samples), np.int64)
     info = []
-    for k, (a, b) in enumerate(fold_ranges(len(samples), folds)):
-        fold_cfg = dataclasses.replace(cfg, real_exclude=(a, b), seed=cfg.seed + k)
-        log.info("fold %d/%d: holding out samples %d..%d", k + 1, folds, a, b - 1)
+    for k, (held, excluded) in enumerate(blocks):
+        fold_cfg = dataclasses.replace(cfg, real_exclude=None, real_holdout=tuple(int(i) for i in excluded), seed=cfg.seed + k)
+        log.info("fold %d/%d: holding out %d samples (%d kept from training)", k + 1, folds, len(held), len(excluded))
         result = train(fold_cfg, progress=progress)
         est = _TorchEstimator(result.model, result.spec, site)
-        pred[a:b] = est.estimate([s.views for s in samples[a:b]])
-        info.append({"fold": k + 1, "held_out": [a, b], "best_epoch": result.best_epoch, "minutes": round(result.minutes, 2)})
+        pred[held], std[held] = est.estimate_with_std([samples[i].views for i in held])
+        fold_of[held] = k + 1
+        info.append({"fold": k + 1, "held_out": int(len(held)), "excluded": int(len(excluded)), "best_epoch": result.best_epoch,
+                     "minutes": round(result.minutes, 2)})
     baseline = predict(samples, AnalyticEstimator(site))
     return {"folds": info, "reports": score(samples, {"model": pred, "analytic": baseline}, offset), "truth_offset_m": offset,
-            "predictions": pred}
+            "predictions": pred, "std": std, "analytic": baseline, "fold": fold_of, "split": split,
+            "truth": np.array([s.truth for s in samples]), "views": np.array([len(s.views) for s in samples])}
 
 
 class _TorchEstimator:
@@ -74,16 +128,20 @@ class _TorchEstimator:
         self.model, self.spec, self.site = model, spec, site
 
     def estimate(self, view_sets):
+        return self.estimate_with_std(view_sets)[0]
+
+    def estimate_with_std(self, view_sets):
         import torch
 
         from superbody.host.graph import build_batch
+        from superbody.models.nets import decode_std
 
         if not view_sets:
-            return np.zeros((0, 3))
+            return np.zeros((0, 3)), np.zeros((0, 3))
         b = build_batch(list(view_sets), self.site, self.spec)
         with torch.no_grad():
             out = self.model(torch.from_numpy(b.x), torch.from_numpy(b.adj), torch.from_numpy(b.mask)).numpy()
-        return self.model.decode(out, self.site)
+        return self.model.decode(out, self.site), decode_std(out, self.model.scale)
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -96,22 +154,31 @@ def _run(args: argparse.Namespace) -> int:
             raise ValueError(f"--real {cfg.real}: no such file (cross-validation needs the real data)")
         if cfg.init and not Path(cfg.init).is_file():
             raise ValueError(f"--init {cfg.init}: no such file")
+        if not 0.0 <= args.buffer <= 5.0:
+            raise ValueError(f"--buffer must be in [0, 5] metres, got {args.buffer}")
     except (ValueError, SiteError) as e:
         print(f"superbody crossval: error: {e}", file=sys.stderr)
         return 2
-    out = crossvalidate(cfg, args.folds, args.truth_offset, progress=sys.stderr.isatty() and not args.no_progress)
-    print(f"blocked {args.folds}-fold cross-validation on {cfg.real} ({cfg.arch}, {cfg.variant}{', 3D' if cfg.use_3d else ''}):")
+    out = crossvalidate(cfg, args.folds, args.truth_offset, progress=sys.stderr.isatty() and not args.no_progress,
+                        split=args.split, buffer_m=args.buffer)
+    print(f"blocked {args.folds}-fold cross-validation ({args.split} blocks) on {cfg.real} ({cfg.arch}, {cfg.variant}{', 3D' if cfg.use_3d else ''}):")
     print(format_table(out["reports"], out["truth_offset_m"]))
     if args.json_out:
-        doc = {"config": cfg.to_json(), "folds": out["folds"], "truth_offset_m": out["truth_offset_m"], **out["reports"]}
+        doc = {"config": cfg.to_json(), "split": args.split, "folds": out["folds"], "truth_offset_m": out["truth_offset_m"], **out["reports"]}
         Path(args.json_out).write_text(json.dumps(doc, indent=1) + "\n")
+    if args.predictions_out:
+        np.savez(args.predictions_out, **{k: out[k] for k in ("predictions", "std", "analytic", "truth", "views", "fold")},
+                 truth_offset_m=out["truth_offset_m"], split=args.split)
     return 0
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("crossval", help="blocked k-fold cross-validation of sim + real training on a WheresTheFellow file")
     add_train_args(p)
-    p.add_argument("--folds", type=int, default=5, help="contiguous folds (default 5)")
+    p.add_argument("--folds", type=int, default=5, help="folds (default 5)")
+    p.add_argument("--split", choices=SPLITS, default="time", help="block the file by time segments or by floor regions (default time)")
+    p.add_argument("--buffer", type=float, default=0.3, help="--split space: also keep samples this close (m) to the held-out region out of training")
+    p.add_argument("--predictions-out", help="write the held-out predictions, sigmas, analytic poses and truth (.npz)")
     p.add_argument("--truth-offset", type=float, default=None, help="chest-tracker offset of the file's truth, metres (default: the dataset's)")
     p.add_argument("--json-out", help="write the reports as JSON")
     p.set_defaults(func=_run)
