@@ -27,10 +27,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _add_train(sub: argparse._SubParsersAction) -> None:
-    from superbody.models import crossval, train  # light: torch is imported only when a run starts
+    from superbody.models import coverage, crossval, train  # light: torch is imported only when a run starts
 
     train.register(sub)
     crossval.register(sub)
+    coverage.register(sub)
 
 
 def _fail(command: str, message: str) -> int:
@@ -59,6 +60,22 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--name", default="wtf-apartment", help="site name (default: %(default)s)")
     d.add_argument("--fps", type=float, default=15.0, help="publishing rate written for each camera (default: %(default)s)")
     d.set_defaults(func=_run_calibrate_from_dataset)
+    h = csub.add_parser(
+        "hybrid",
+        help="fit the hybrid estimator's uncertainties on real data and write them into models",
+        description=(
+            "From a cross-validation's held-out predictions (superbody crossval --predictions-out) and the real "
+            "file: scale the network's predicted sigmas to its real errors, measure the analytic estimator's "
+            "sigmas per camera count, score the hybrid on the cross-validation (each fold calibrated on the "
+            "others), and write the calibration into each --model (metadata pose.std_scale, hybrid.calibration)."
+        ),
+    )
+    h.add_argument("--cv", type=Path, required=True, metavar="CV.npz", help="held-out predictions from superbody crossval --predictions-out")
+    h.add_argument("--dataset", type=Path, required=True, metavar="PATH.json", help="the WheresTheFellow file the cross-validation used")
+    h.add_argument("--site", type=Path, default=Path("deploy/sites/wtf-apartment.toml"), metavar="SITE.toml", help="site file (default: %(default)s)")
+    h.add_argument("--model", type=Path, action="append", default=[], metavar="M.onnx", help="model to write the calibration into (repeatable)")
+    h.add_argument("--json-out", type=Path, metavar="F", help="write the calibration, coverage and scores as JSON")
+    h.set_defaults(func=_run_calibrate_hybrid)
 
 
 _FPS_NOTE = """\
@@ -139,6 +156,61 @@ def _run_calibrate_from_dataset(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from superbody.edge.site import SiteError, load_site
+    from superbody.models import hybrid
+    from superbody.models.evaluate import format_table, score
+    from superbody.models.wtf import DatasetError, load_wtf, truth_to_torso
+
+    command = "calibrate hybrid"
+    try:
+        site = load_site(args.site)
+        samples = load_wtf(args.dataset, site=site)
+        cv = np.load(args.cv)
+        net, std, fold = cv["predictions"], cv["std"], cv["fold"]
+        offset = float(cv["truth_offset_m"])
+    except (DatasetError, SiteError) as e:
+        return _fail(command, str(e))
+    except (OSError, ValueError, KeyError) as e:
+        return _fail(command, f"--cv {args.cv}: not a crossval predictions file ({e})")
+    if len(net) != len(samples):
+        return _fail(command, f"--cv {args.cv} has {len(net)} predictions, --dataset {args.dataset} has {len(samples)} samples")
+    for m in args.model:
+        if not m.is_file():
+            return _fail(command, f"--model {m}: no such file")
+    truth = truth_to_torso(np.array([s.truth for s in samples]), offset)
+    cams = np.array([len(s.views) for s in samples])
+    analytic, pair = hybrid.analytic_with_pairs(samples, site)
+    try:
+        scale = hybrid.fit_std_scale(net, std, truth)
+        cal = hybrid.fit_analytic(analytic, pair, truth, cams, source=f"{args.dataset.name}, {len(samples)} samples; network sigmas from {args.cv.name}")
+        lofo, lofo_std, source = hybrid.leave_one_fold_out(net, std, analytic, pair, truth, cams, fold, site)
+    except ValueError as e:
+        return _fail(command, str(e))
+    reports = score(samples, {"hybrid (CV)": lofo, "network (CV)": net, "analytic": analytic}, offset)
+    coverage = {"network": hybrid.sigma_coverage(net, std * scale, truth), "hybrid": hybrid.sigma_coverage(lofo, lofo_std, truth)}
+    print(f"network sigma scale (x, y, yaw): {', '.join(f'{v:.2f}' for v in scale)}")
+    print("analytic sigma by cameras (x mm, y mm, yaw deg): " + "; ".join(
+        f"{k}: {s[0] * 1000:.0f}, {s[1] * 1000:.0f}, {np.degrees(s[2]):.1f}" for k, s in zip((1, 2, 3), cal.analytic_std))
+        + f"; yaw without a shoulder/hip pair {np.degrees(cal.analytic_yaw_std_no_pair):.0f} deg")
+    for name, cov in coverage.items():
+        print(f"{name}: errors within 1 sigma (x, y, yaw) {', '.join(f'{v:.2f}' for v in cov['within_1_sigma'])}; "
+              f"within 2 sigma {', '.join(f'{v:.2f}' for v in cov['within_2_sigma'])} (a calibrated Gaussian: 0.68, 0.95)")
+    print("hybrid sources: " + ", ".join(f"{s} {int((source == s).sum())}" for s in ("hybrid", "onnx", "analytic")))
+    print(format_table(reports, offset))
+    for m in args.model:
+        hybrid.write_calibration(m, scale, cal)
+        print(f"wrote the calibration into {m}")
+    if args.json_out is not None:
+        doc = {"std_scale": [float(v) for v in scale], "calibration": json.loads(cal.to_json()), "coverage": coverage,
+               "sources": {s: int((source == s).sum()) for s in ("hybrid", "onnx", "analytic")}, "reports": reports, "truth_offset_m": offset}
+        args.json_out.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+        print(f"wrote {args.json_out}")
+    return 0
+
+
 # --- eval ---------------------------------------------------------------------------------------
 
 _DEFAULT_SITE = "deploy/sites/wtf-apartment.toml"
@@ -215,6 +287,12 @@ def _run_eval(args: argparse.Namespace) -> int:
     from superbody.host.analytic import AnalyticEstimator
     from superbody.models.evaluate import format_table, json_report, predict, score, write_predictions_csv
 
+    from superbody.host.hybrid import HybridEstimator
+
+    # A hybrid model is also scored as its network alone, to show what the fusion adds.
+    for name in names:
+        if isinstance(estimators[name], HybridEstimator):
+            estimators[f"{name} (network)"] = estimators[name].net
     estimators[_BASELINE] = AnalyticEstimator(site)
     try:
         predictions = {
@@ -245,13 +323,16 @@ def _run_eval(args: argparse.Namespace) -> int:
 
 
 def _load_model(path: Path, site):
-    """An OnnxEstimator for the site; ValueError (one line) if the file is missing or unreadable."""
-    from superbody.host.estimator import ModelMismatchError, OnnxEstimator
+    """The estimator the host would run on this model (``host.cli.build_estimator``, "auto": the
+    hybrid when the model carries its calibration); ValueError (one line) if the file is missing
+    or unreadable."""
+    from superbody.host.cli import build_estimator
+    from superbody.host.estimator import ModelMismatchError
 
     if not path.is_file():
         raise ValueError(f"--model {path}: no such file")
     try:
-        return OnnxEstimator(path, site)
+        return build_estimator(site, "auto", path)[0]
     except ModelMismatchError:
         raise
     except Exception as e:  # onnxruntime's load errors (InvalidProtobuf, Fail, ...) derive from Exception only

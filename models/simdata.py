@@ -26,7 +26,8 @@ from tqdm import tqdm
 
 from superbody.edge.camera import Camera, look_at_rotation
 from superbody.edge.observation import PersonView
-from superbody.edge.simulator import NoiseModel, World, render_views
+from superbody.edge.angles import wrap_angle
+from superbody.edge.simulator import NoiseModel, PersonState, World, _FreeSpace, render_views
 from superbody.edge.site import Obstacle, Site
 from superbody.models.samples import Sample
 
@@ -46,6 +47,10 @@ class SimDataConfig:
         depth: include camera-frame 3D joints (depth cameras).
         noise: the detector noise model; each chunk jitters it (domain randomisation).
         randomise_noise: whether to jitter the noise per chunk.
+        placed_fraction: share of instants at which every person is moved, as they are (body,
+            gait, arms), to a uniformly random free floor point with a uniformly random heading:
+            walks between random goals visit the middle of a room far more than its edges and
+            corners, where single-view cases live; placement covers the whole floor evenly.
     """
 
     samples: int = 20_000
@@ -55,8 +60,11 @@ class SimDataConfig:
     depth: bool = False
     noise: NoiseModel = field(default_factory=NoiseModel)
     randomise_noise: bool = True
+    placed_fraction: float = 0.5
 
     def __post_init__(self) -> None:
+        if not 0.0 <= self.placed_fraction <= 1.0:
+            raise ValueError(f"placed_fraction must be in [0, 1], got {self.placed_fraction}")
         if not 1 <= self.samples <= 5_000_000:
             raise ValueError(f"samples must be in [1, 5000000], got {self.samples}")
         if not 1 <= self.max_people <= 10:
@@ -84,9 +92,12 @@ def _chunk(site: Site, config: SimDataConfig, index: int, count: int) -> list[Sa
     world = World(site, people, seed=int(rng.integers(0, 2**31)))
     out: list[Sample] = []
     apps = [p.appearance for p in world.people]
+    free = _placement_space(site)
     while len(out) < count:
         t = float(rng.uniform(0, 1e5))
         states = world.states(t)
+        if rng.uniform() < config.placed_fraction:
+            states = _placed(states, free, rng)
         seen: dict[int, dict[str, PersonView]] = {}
         for cam in site.cameras:
             for k, view in render_views(states, apps, cam, rng, noise, site, histograms=False, depth=config.depth):
@@ -99,6 +110,36 @@ def _chunk(site: Site, config: SimDataConfig, index: int, count: int) -> list[Sa
             out.append(Sample(views=views, truth=np.array([x, y, s.yaw]), stamp_ns=int(t * 1e9)))
             if len(out) == count:
                 break
+    return out
+
+
+_PLACE_CACHE: dict[int, tuple[Site, _FreeSpace]] = {}
+
+
+def _placement_space(site: Site) -> _FreeSpace:
+    """Free floor for placed people: up to 0.1 m from the floor's edge (walks keep a wider
+    berth, so that people do not brush the walls; placement must reach the edges too)."""
+    hit = _PLACE_CACHE.get(id(site))
+    if hit is None or hit[0] is not site:
+        hit = (site, _FreeSpace(site, margin=0.1))
+        _PLACE_CACHE[id(site)] = hit
+    return hit[1]
+
+
+def _placed(states: list[PersonState], free, rng: np.random.Generator, clearance_m: float = 0.6) -> list[PersonState]:
+    """The same people, each rigidly moved to a random free point and heading, kept apart."""
+    out: list[PersonState] = []
+    for s in states:
+        for _ in range(20):  # bounded: a crowded small floor keeps the last draw
+            xy = free.random_point(rng)
+            if all(math.hypot(xy[0] - o.x, xy[1] - o.y) >= clearance_m for o in out):
+                break
+        yaw = float(rng.uniform(-math.pi, math.pi))
+        c, si = math.cos(yaw - s.yaw), math.sin(yaw - s.yaw)
+        rel = s.joints[:, :2] - [s.x, s.y]  # (17, 2)
+        joints = s.joints.copy()
+        joints[:, :2] = rel @ np.array([[c, si], [-si, c]]) + xy  # rotate by (yaw - s.yaw), then move
+        out.append(PersonState(x=float(xy[0]), y=float(xy[1]), yaw=float(wrap_angle(yaw)), joints=joints))
     return out
 
 
