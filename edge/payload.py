@@ -185,12 +185,15 @@ def parse_json(payload: Any, max_bytes: int) -> Any:
 # --- validation ----------------------------------------------------------------------------
 
 
-def check_message(doc: Any, schema: str, version: int, fields: tuple[str, ...]) -> dict:
+def check_message(doc: Any, schema: str, version: int | tuple[int, ...], fields: tuple[str, ...]) -> dict:
     """The top-level object: ``schema`` and ``version`` first, then exactly ``fields``.
 
+    ``version`` is the version this decoder reads, or a tuple of the versions it reads.
     Schema and version are checked before the other fields, so a newer message is reported as
     such (reason ``schema`` or ``version``), not as unknown fields.
     """
+    versions = version if isinstance(version, tuple) else (version,)
+    reads = " or ".join(str(v) for v in versions)
     if not isinstance(doc, dict):
         fail(ROOT, "type", f"must be a JSON object, got {brief(doc)}")
     if isinstance(doc, _DuplicateKeys):
@@ -200,13 +203,13 @@ def check_message(doc: Any, schema: str, version: int, fields: tuple[str, ...]) 
     if doc["schema"] != schema:
         fail("schema", "schema", f"must be {schema!r}, got {brief(doc['schema'])}")
     if "version" not in doc:
-        fail("version", "missing", f"is required; this decoder reads version {version}")
+        fail("version", "missing", f"is required; this decoder reads version {reads}")
     got = doc["version"]
     if type(got) is not int:
-        fail("version", "type", f"must be the integer {version}, got {brief(got)}")
-    if got != version:
-        fail("version", "version", f"{got} is not supported; this decoder reads version {version}")
-    return check_object(doc, "", fields, label=f"{schema} version {version}")
+        fail("version", "type", f"must be the integer {reads}, got {brief(got)}")
+    if got not in versions:
+        fail("version", "version", f"{got} is not supported; this decoder reads version {reads}")
+    return check_object(doc, "", fields, label=f"{schema} version {got}")
 
 
 def check_object(

@@ -34,7 +34,7 @@ from superbody.edge.clock import WorldClock
 from superbody.edge.observation import PersonView
 from superbody.edge.site import Site
 from superbody.host import pose as pose_msg
-from superbody.host.estimator import Estimator
+from superbody.host.estimator import Estimator, estimate_detailed
 from superbody.host.filter import FilterConfig, PoseFilter
 from superbody.host.tracker import Tracker, TrackerConfig
 
@@ -113,6 +113,7 @@ class Aggregator:
         self._poses: dict[int, tuple[pose_msg.PersonPose, int]] = {}  # track -> (pose, newest stamp)
         self._cam_size = {c.id: (c.width, c.height) for c in site.cameras}
         self._seq = 0
+        self._source = estimator_name.split(":", 1)[0]  # per-person label for estimators that give none
 
     def ingest(self, payload: bytes, key: str | None, now_ns: int) -> bool:
         """Validate one observation payload and feed the tracker.
@@ -159,20 +160,22 @@ class Aggregator:
         newest = {tid: max(self.tracker.track(tid).views[c].stamp_ns for c in views) for tid, views in sets.items()}
         todo = [tid for tid in sets if newest[tid] > self._last_input.get(tid, -1)]
         if todo:
-            est = self.estimator.estimate([sets[tid] for tid in todo])  # one batched call
-            for tid, (x, y, yaw) in zip(todo, est):
+            est = estimate_detailed(self.estimator, [sets[tid] for tid in todo], self._source)  # one batched call
+            for tid, (x, y, yaw), std, source in zip(todo, est.pose, est.std, est.source):
                 self._last_input[tid] = newest[tid]
                 if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(yaw)):
                     self.rejected["no_estimate"] += 1
                     continue
                 f = self._filters.setdefault(tid, PoseFilter(self.config.filter))
-                fp = f.update(newest[tid], float(x), float(y), float(yaw))
+                # The estimator's own sigma is the measurement noise: a poor single-view yaw moves a track less.
+                meas_std = tuple(float(s) for s in std) if np.all(np.isfinite(std)) and np.all(std > 0) else None
+                fp = f.update(newest[tid], float(x), float(y), float(yaw), meas_std)
                 self.tracker.set_position(tid, (fp.x, fp.y), newest[tid])
                 views = sets[tid]
                 self._poses[tid] = (pose_msg.PersonPose(
                     id=tid, x=fp.x, y=fp.y, yaw=fp.yaw, vx=fp.vx, vy=fp.vy, yaw_rate=fp.yaw_rate,
                     cov=np.asarray(fp.cov), confidence=confidence(views), cameras=tuple(sorted(views)),
-                    stamp_ns=newest[tid], views=len(views),
+                    stamp_ns=newest[tid], views=len(views), estimator=source,
                 ), newest[tid])
         people = tuple(p for tid, (p, _) in sorted(self._poses.items()) if tid in sets)
         self._seq += 1

@@ -88,16 +88,22 @@ class AnalyticEstimator:
 
     def estimate(self, view_sets: Sequence[Mapping[str, PersonView]]) -> NDArray[np.float64]:
         """(B, 3) x, y, yaw for each person's views."""
-        out = np.zeros((len(view_sets), 3))
-        for i, views in enumerate(view_sets):
-            out[i] = self._one(views)
-        return out
+        return self.estimate_with_pairs(view_sets)[0]
 
-    def _one(self, views: Mapping[str, PersonView]) -> NDArray[np.float64]:
+    def estimate_with_pairs(self, view_sets: Sequence[Mapping[str, PersonView]]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """(B, 3) poses, and (B,) whether each yaw came from a shoulder or hip pair (the
+        reliable case; otherwise it came from the head, or is 0 for lack of anything)."""
+        out = np.zeros((len(view_sets), 3))
+        pair = np.zeros(len(view_sets), bool)
+        for i, views in enumerate(view_sets):
+            out[i], pair[i] = self._one(views)
+        return out, pair
+
+    def _one(self, views: Mapping[str, PersonView]) -> tuple[NDArray[np.float64], bool]:
         j = joints_3d(views, self.site)
         seen = ~np.isnan(j[:, 0])
         if not seen.any():
-            return np.array([np.nan, np.nan, 0.0])
+            return np.array([np.nan, np.nan, 0.0]), False
         torso = [t for t in body.TORSO if seen[t]]
         centre = j[torso, :2].mean(0) if torso else j[seen, :2].mean(0)
         facing = np.zeros(2)
@@ -105,9 +111,10 @@ class AnalyticEstimator:
             if seen[left] and seen[right]:
                 lr = j[left, :2] - j[right, :2]
                 facing += np.array([lr[1], -lr[0]])  # the left-to-right vector turned -90 degrees
+        pair = bool(facing.any())
         if not facing.any() and seen[body.NOSE]:
             head = [h for h in _HEAD if seen[h]]
             if head:
                 facing = j[body.NOSE, :2] - j[head, :2].mean(0)
         yaw = math.atan2(facing[1], facing[0]) if facing.any() else 0.0
-        return np.array([centre[0], centre[1], yaw])
+        return np.array([centre[0], centre[1], yaw]), pair

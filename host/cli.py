@@ -19,7 +19,7 @@ __all__ = ["register", "build_estimator", "default_model"]
 
 log = logging.getLogger("superbody.host")
 
-ESTIMATORS = ("onnx", "analytic")
+ESTIMATORS = ("auto", "hybrid", "onnx", "analytic")
 _MODELS_DIR = Path(__file__).resolve().parents[1] / "models"
 
 
@@ -32,8 +32,12 @@ def default_model(site: Site) -> Path | None:
     return None
 
 
-def build_estimator(site: Site, kind: str = "onnx", model: str | Path | None = None):
+def build_estimator(site: Site, kind: str = "auto", model: str | Path | None = None):
     """The estimator by name, and the name reported in PoseArrays.
+
+    Kinds: ``"hybrid"`` (the network fused with geometry, host.hybrid; the model must carry a
+    hybrid calibration), ``"onnx"`` (the network alone), ``"analytic"`` (geometry alone), and
+    ``"auto"``: hybrid when the model carries a calibration, else the network alone.
 
     Raises:
         ValueError: unknown kind (listing the valid ones), or no model for the site.
@@ -43,7 +47,7 @@ def build_estimator(site: Site, kind: str = "onnx", model: str | Path | None = N
         from superbody.host.analytic import AnalyticEstimator
 
         return AnalyticEstimator(site), "analytic"
-    if kind != "onnx":
+    if kind not in ESTIMATORS:
         raise ValueError(f"unknown estimator {kind!r}; valid estimators: {', '.join(ESTIMATORS)}")
     path = Path(model) if model else default_model(site)
     if path is None:
@@ -52,8 +56,12 @@ def build_estimator(site: Site, kind: str = "onnx", model: str | Path | None = N
     if not path.is_file():
         raise ValueError(f"--model {path}: no such file")
     from superbody.host.estimator import OnnxEstimator
+    from superbody.host.hybrid import META_HYBRID, HybridEstimator
 
-    return OnnxEstimator(path, site), f"onnx:{path.name}"
+    net = OnnxEstimator(path, site)
+    if kind == "hybrid" or (kind == "auto" and net.has_std and META_HYBRID in net.metadata):
+        return HybridEstimator(net, site), f"hybrid:{path.name}"
+    return net, f"onnx:{path.name}"
 
 
 def _unit(text: str) -> float:
@@ -101,7 +109,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     host_sub = host.add_subparsers(dest="host_command", metavar="COMMAND", required=True)
     p = host_sub.add_parser("run", help="run the aggregator: observations in, people's poses out")
     p.add_argument("--site", required=True, help="site file (TOML)")
-    p.add_argument("--estimator", choices=ESTIMATORS, default="onnx", help="pose estimator (default: onnx)")
+    p.add_argument("--estimator", choices=ESTIMATORS, default="auto",
+                   help="pose estimator (default auto: hybrid when the model carries a hybrid calibration, else the network alone)")
     p.add_argument("--model", help="ONNX model (default: the shipped models/<site>.int8.onnx)")
     p.add_argument("--freshness", type=positive, default=0.5, help="seconds a camera's view stays in set S (default 0.5)")
     p.add_argument("--d-max", type=_unit, default=0.65, help="colour match threshold, Bhattacharyya distance (default 0.65)")

@@ -58,7 +58,7 @@ class DemoConfig:
         duration_s: stop after this many simulated seconds (None: until Ctrl-C).
         clock_scale: simulated seconds per wall second.
         port: loopback port of the demo's Zenoh router.
-        estimator: "onnx" or "analytic".
+        estimator: "auto", "hybrid", "onnx" or "analytic" (host.cli.build_estimator).
         model: ONNX model (default: the shipped one for the site).
         kill_camera: a camera id to kill mid-run (fault injection), or None.
         kill_at_s: when to kill it, in simulated seconds from the start.
@@ -72,7 +72,7 @@ class DemoConfig:
     duration_s: float | None = None
     clock_scale: float = 1.0
     port: int = 7447
-    estimator: str = "onnx"
+    estimator: str = "auto"
     model: str | None = None
     kill_camera: str | None = None
     kill_at_s: float = 0.0
@@ -325,7 +325,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--duration", type=positive, default=None, help="stop after this many simulated seconds (default: Ctrl-C)")
     p.add_argument("--clock-scale", type=positive, default=1.0, help="simulated seconds per wall second (default 1)")
     p.add_argument("--port", type=int, default=7447, help="loopback port of the demo's Zenoh router (default 7447)")
-    p.add_argument("--estimator", choices=("onnx", "analytic"), default="onnx", help="pose estimator (default: the shipped int8 model)")
+    p.add_argument("--estimator", choices=("auto", "hybrid", "onnx", "analytic"), default="auto",
+                   help="pose estimator (default auto: the shipped int8 model, fused with geometry when it carries a hybrid calibration)")
     p.add_argument("--model", help="ONNX model (default: models/<site>.int8.onnx)")
     p.add_argument("--kill-camera", metavar="ID", help="kill this camera's process mid-run (fault injection)")
     p.add_argument("--kill-at", type=positive, default=10.0, help="simulated second at which to kill it (default 10)")

@@ -64,7 +64,8 @@ __all__ = [
 ]
 
 SCHEMA: Final[str] = "superbody.people"
-VERSION: Final[int] = 1
+VERSION: Final[int] = 2  # what the encoder writes
+READ_VERSIONS: Final[tuple[int, ...]] = (1, 2)  # what the decoder reads (1: no per-person estimator)
 # Zenoh 1.x renders an Encoding as "<mime>;<schema>": this string equals str(zenoh_encoding()).
 ENCODING: Final[str] = f"application/json;{SCHEMA}/{VERSION}"
 MAX_PEOPLE: Final[int] = 64
@@ -75,10 +76,10 @@ MAX_PAYLOAD_BYTES: Final[int] = 512 * 1024
 _TOP_FIELDS: Final[tuple[str, ...]] = (
     "schema", "version", "site", "seq", "stamp_ns", "latency_ns", "estimator", "cameras_alive", "people",
 )
-_LABEL: Final[str] = f"{SCHEMA} version {VERSION}"  # names the schema in unknown_field errors
-_PERSON_FIELDS: Final[tuple[str, ...]] = (
+_PERSON_FIELDS_V1: Final[tuple[str, ...]] = (
     "id", "x", "y", "yaw", "vx", "vy", "yaw_rate", "cov", "confidence", "views", "cameras", "stamp_ns",
 )
+_PERSON_FIELDS: Final[tuple[str, ...]] = (*_PERSON_FIELDS_V1, "estimator")  # version 2
 _MAX_ID: Final[int] = 2**53 - 1  # exact in a double (JavaScript's Number.MAX_SAFE_INTEGER)
 _MAX_VIEWS: Final[int] = 255
 _MAX_COORD_M: Final[float] = 1000.0
@@ -111,6 +112,8 @@ class PersonPose:
         cameras: ids of the cameras whose views were used.
         stamp_ns: capture time of the newest view used, UNIX nanoseconds.
         views: number of views used (at least ``len(cameras)``; 0 when the pose is predicted).
+        estimator: which estimator produced this person's pose: ``"hybrid"``, ``"onnx"``,
+            ``"analytic"`` (version 2; a version 1 message gives its top-level ``estimator``).
     """
 
     id: int
@@ -125,11 +128,12 @@ class PersonPose:
     cameras: tuple[str, ...]
     stamp_ns: int
     views: int
+    estimator: str = "unknown"
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, PersonPose):
             return NotImplemented
-        scalars = ("id", "x", "y", "yaw", "vx", "vy", "yaw_rate", "confidence", "cameras", "stamp_ns", "views")
+        scalars = ("id", "x", "y", "yaw", "vx", "vy", "yaw_rate", "confidence", "cameras", "stamp_ns", "views", "estimator")
         return all(getattr(self, a) == getattr(other, a) for a in scalars) and np.array_equal(self.cov, other.cov)
 
     __hash__ = None  # type: ignore[assignment]
@@ -226,8 +230,8 @@ def _cov(value: Any, path: str) -> NDArray[np.float64]:
     return cov
 
 
-def _person(p: Any, path: str) -> PersonPose:
-    check_object(p, path, _PERSON_FIELDS, label=_LABEL)
+def _person(p: Any, path: str, version: int, estimator: str) -> PersonPose:
+    check_object(p, path, _PERSON_FIELDS if version >= 2 else _PERSON_FIELDS_V1, label=f"{SCHEMA} version {version}")
     coord = f"[{-_MAX_COORD_M:g}, {_MAX_COORD_M:g}] (metres)"
     speed = f"[{-_MAX_SPEED:g}, {_MAX_SPEED:g}]"
     pid = check_int(p["id"], f"{path}.id", 0, _MAX_ID)
@@ -244,16 +248,19 @@ def _person(p: Any, path: str) -> PersonPose:
     if views < len(cameras) or (views > 0 and not cameras):
         fail(f"{path}.views", "range", f"must be >= the {len(cameras)} cameras listed, and 0 only when none is, got {views}")
     stamp_ns = check_int(p["stamp_ns"], f"{path}.stamp_ns", 0, MAX_INT63)
+    if version >= 2:
+        estimator = _estimator(p["estimator"], f"{path}.estimator")
     return PersonPose(
         id=pid, x=x, y=y,
         yaw=math.pi if yaw == -math.pi else yaw,  # the same heading; keep the documented (-pi, pi]
         vx=vx, vy=vy, yaw_rate=yaw_rate, cov=cov, confidence=confidence, cameras=cameras,
-        stamp_ns=stamp_ns, views=views,
+        stamp_ns=stamp_ns, views=views, estimator=estimator,
     )
 
 
 def _pose_array(doc: Any, expected_site: str | None) -> PoseArray:
-    check_message(doc, SCHEMA, VERSION, _TOP_FIELDS)
+    check_message(doc, SCHEMA, READ_VERSIONS, _TOP_FIELDS)
+    version = doc["version"]
 
     site = check_name(doc["site"], "site")
     if expected_site is not None and site != expected_site:
@@ -268,7 +275,7 @@ def _pose_array(doc: Any, expected_site: str | None) -> PoseArray:
     seen: dict[int, int] = {}
     out = []
     for i, p in enumerate(people):
-        person = _person(p, f"people[{i}]")
+        person = _person(p, f"people[{i}]", version, estimator)
         if person.id in seen:
             fail(f"people[{i}].id", "range", f"repeats the id of people[{seen[person.id]}] ({person.id}); ids must be distinct")
         seen[person.id] = i
@@ -352,6 +359,7 @@ def _person_doc(p: PersonPose, path: str) -> dict:
         "views": as_int(p.views),
         "cameras": _as_list(p.cameras),
         "stamp_ns": as_int(p.stamp_ns),
+        "estimator": p.estimator,
     }
 
 

@@ -50,6 +50,7 @@ def make_person(rng: np.random.Generator, pid: int, cameras: tuple[str, ...] = (
         vx=float(rng.normal(0, 1)), vy=float(rng.normal(0, 1)), yaw_rate=float(rng.normal(0, 0.5)),
         cov=make_cov(rng), confidence=float(rng.uniform(0, 1)), cameras=cameras,
         stamp_ns=STAMP - int(rng.integers(0, 50_000_000)), views=len(cameras),
+        estimator=("hybrid", "onnx", "analytic")[pid % 3],
     )
 
 
@@ -132,7 +133,10 @@ BAD_CASES = [
     # schema and version
     pytest.param(edit(lambda d: d.__setitem__("schema", "superbody.observation")), {}, "schema", "schema", id="observation-schema"),
     pytest.param(edit(lambda d: d.pop("schema")), {}, "schema", "missing", id="no-schema"),
-    pytest.param(edit(lambda d: d.update(version=2, novelty=1)), {}, "version", "version", id="version-2-before-unknown-fields"),
+    pytest.param(edit(lambda d: d.update(version=3, novelty=1)), {}, "version", "version", id="version-3-before-unknown-fields"),
+    pytest.param(edit(lambda d: p0(d).pop("estimator")), {}, "people[0].estimator", "missing", id="v2-person-without-estimator"),
+    pytest.param(edit(lambda d: p0(d).__setitem__("estimator", "")), {}, "people[0].estimator", "format", id="empty-person-estimator"),
+    pytest.param(edit(lambda d: d.update(version=1)), {}, "people[0].estimator", "unknown_field", id="v1-has-no-person-estimator"),
     pytest.param(edit(lambda d: d.__setitem__("version", 1.0)), {}, "version", "type", id="version-float"),
     # top-level fields
     pytest.param(edit(lambda d: d.pop("latency_ns")), {}, "latency_ns", "missing", id="missing-latency"),
@@ -275,7 +279,7 @@ def test_encoding_is_compact_and_canonical() -> None:
     assert ", " not in text and ": " not in text
     doc = json.loads(text)
     assert list(doc) == ["schema", "version", "site", "seq", "stamp_ns", "latency_ns", "estimator", "cameras_alive", "people"]
-    assert list(doc["people"][0]) == ["id", "x", "y", "yaw", "vx", "vy", "yaw_rate", "cov", "confidence", "views", "cameras", "stamp_ns"]
+    assert list(doc["people"][0]) == ["id", "x", "y", "yaw", "vx", "vy", "yaw_rate", "cov", "confidence", "views", "cameras", "stamp_ns", "estimator"]
     assert (doc["schema"], doc["version"]) == (SCHEMA, VERSION)
     assert all(v == float(f"{v:.6g}") for v in doc["people"][0]["cov"])  # 6 significant digits
 
@@ -340,7 +344,17 @@ def test_encode_accepts_float_noise_in_cov_and_numpy_scalars() -> None:
 
 def test_zenoh_encoding_matches_constant() -> None:
     pytest.importorskip("zenoh")
-    assert str(zenoh_encoding()) == ENCODING == "application/json;superbody.people/1"
+    assert str(zenoh_encoding()) == ENCODING == "application/json;superbody.people/2"
+
+
+def test_version_1_still_decodes_with_the_top_level_estimator() -> None:
+    """Subscribers upgraded first still read a version 1 host: its people carry no estimator."""
+    doc = json.loads(encode(PoseArray(site="lab", seq=1, stamp_ns=5, estimator="analytic", people=(make_person(np.random.default_rng(0), 3),))))
+    doc["version"] = 1
+    for p in doc["people"]:
+        del p["estimator"]
+    poses = decode(json.dumps(doc).encode())
+    assert [p.estimator for p in poses.people] == ["analytic"]
 
 
 def test_docs_example_payload_decodes() -> None:
@@ -374,6 +388,7 @@ def person_poses(draw: st.DrawFn, pid: int) -> PersonPose:
         vx=draw(_f(-100, 100)), vy=draw(_f(-100, 100)), yaw_rate=draw(_f(-100, 100)), cov=cov,
         confidence=draw(_f(0, 1)), cameras=cameras, stamp_ns=draw(st.integers(0, 2**63 - 1)),
         views=draw(st.integers(len(cameras), 255)) if cameras else 0,
+        estimator=draw(st.sampled_from(["hybrid", "onnx", "analytic", "x" * 128])),
     )
 
 

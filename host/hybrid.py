@@ -1,0 +1,163 @@
+"""The hybrid estimator: the network and geometry, each trusted as far as it has earned.
+
+Per person, the network (``host.estimator.OnnxEstimator``) gives a pose and its own 1-sigma
+(``pose_std``, scaled by the calibration in the model's metadata), and the analytic estimator
+(``host.analytic``) gives a pose whose 1-sigma depends on how many cameras saw the person and on
+whether a shoulder or hip pair was seen (measured on real data, stored in the model's metadata
+as ``hybrid.calibration``). Then:
+
+1. **Support gate.** Where the network has never been trained (its position, or the
+   geometry's, more than ``floor_margin_m`` outside the site's floor polygon), the pose is the
+   analytic one: label ``"analytic"``.
+2. **Fusion.** Otherwise each of x, y and yaw is the inverse-variance weighted mean of the two
+   (yaw as a weighted mean of unit vectors), with sigma = (1/s_net^2 + 1/s_geo^2)^-1/2: label
+   ``"hybrid"``. Where the geometry found nothing, the network's pose: label ``"onnx"``.
+
+The fused sigma is what the host's filter uses as the measurement noise.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Final
+
+import numpy as np
+from numpy.typing import NDArray
+
+from superbody.edge.floor import point_in_polygon
+from superbody.edge.observation import PersonView
+from superbody.edge.site import Site
+from superbody.host.analytic import AnalyticEstimator
+from superbody.host.estimator import Estimates, ModelMismatchError, OnnxEstimator
+
+__all__ = ["HybridCalibration", "HybridEstimator", "fuse", "META_HYBRID", "SOURCES"]
+
+META_HYBRID: Final[str] = "hybrid.calibration"
+SOURCES: Final[tuple[str, ...]] = ("hybrid", "onnx", "analytic")
+
+
+@dataclass(frozen=True)
+class HybridCalibration:
+    """How far the geometry is trusted, by camera count.
+
+    Attributes:
+        analytic_std: per camera count 1, 2, 3 (3 = three or more), the analytic pose's 1-sigma
+            (x m, y m, yaw rad) when a shoulder or hip pair was seen.
+        analytic_yaw_std_no_pair: the analytic yaw's 1-sigma without a shoulder or hip pair
+            (from the head, or no yaw at all).
+        floor_margin_m: support gate: how far outside the floor polygon a pose may be.
+        source: how the numbers were measured (free text, for the model card).
+    """
+
+    analytic_std: tuple[tuple[float, float, float], ...]
+    analytic_yaw_std_no_pair: float = 3.0
+    floor_margin_m: float = 0.5
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        if len(self.analytic_std) != 3 or any(len(s) != 3 or not all(0 < v < 100 for v in s) for s in self.analytic_std):
+            raise ValueError(f"analytic_std must be 3 rows (1, 2, 3+ cameras) of 3 positive sigmas, got {self.analytic_std!r}")
+        if not 0 < self.analytic_yaw_std_no_pair < 100:
+            raise ValueError(f"analytic_yaw_std_no_pair must be in (0, 100) radians, got {self.analytic_yaw_std_no_pair!r}")
+        if not 0 <= self.floor_margin_m <= 10:
+            raise ValueError(f"floor_margin_m must be in [0, 10] metres, got {self.floor_margin_m!r}")
+
+    def to_json(self) -> str:
+        return json.dumps({"analytic_std": [list(s) for s in self.analytic_std], "analytic_yaw_std_no_pair": self.analytic_yaw_std_no_pair,
+                           "floor_margin_m": self.floor_margin_m, "source": self.source})
+
+    @classmethod
+    def from_json(cls, text: str) -> "HybridCalibration":
+        d = json.loads(text)
+        return cls(analytic_std=tuple(tuple(float(v) for v in s) for s in d["analytic_std"]),
+                   analytic_yaw_std_no_pair=float(d.get("analytic_yaw_std_no_pair", 3.0)),
+                   floor_margin_m=float(d.get("floor_margin_m", 0.5)), source=str(d.get("source", "")))
+
+    def analytic_sigmas(self, cameras: NDArray, pair: NDArray) -> NDArray[np.float64]:
+        """(B, 3) analytic 1-sigma for camera counts (B,) and shoulder-or-hip-pair flags (B,)."""
+        table = np.asarray(self.analytic_std, dtype=np.float64)  # (3, 3)
+        s = table[np.clip(np.asarray(cameras, int), 1, 3) - 1].copy()
+        s[~np.asarray(pair, bool), 2] = self.analytic_yaw_std_no_pair
+        return s
+
+
+def fuse(net: NDArray, net_std: NDArray, geo: NDArray, geo_std: NDArray) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Inverse-variance fusion of two pose estimates.
+
+    Args:
+        net, geo: (B, 3) poses (x, y, yaw).
+        net_std, geo_std: (B, 3) their 1-sigmas.
+
+    Returns:
+        ``(pose, std)``, (B, 3) each; yaw in (-pi, pi].
+    """
+    w_n, w_g = 1.0 / np.square(net_std), 1.0 / np.square(geo_std)  # (B, 3)
+    w = w_n + w_g
+    xy = (w_n[:, :2] * net[:, :2] + w_g[:, :2] * geo[:, :2]) / w[:, :2]  # (B, 2)
+    # yaw: the weighted mean direction of the two unit vectors
+    s = w_n[:, 2] * np.sin(net[:, 2]) + w_g[:, 2] * np.sin(geo[:, 2])
+    c = w_n[:, 2] * np.cos(net[:, 2]) + w_g[:, 2] * np.cos(geo[:, 2])
+    yaw = np.arctan2(s, c)
+    yaw = np.where(yaw <= -np.pi, np.pi, yaw)
+    return np.column_stack([xy, yaw]), 1.0 / np.sqrt(w)
+
+
+class HybridEstimator:
+    """The network fused with geometry (module docstring); implements ``Estimator``.
+
+    Args:
+        net: the ONNX estimator; its model must carry ``hybrid.calibration`` metadata and a
+            ``pose_std`` output.
+        site: the site.
+
+    Raises:
+        ModelMismatchError: the model has no uncertainty output or no hybrid calibration.
+    """
+
+    def __init__(self, net: OnnxEstimator, site: Site):
+        if not net.has_std:
+            raise ModelMismatchError(f"{net.path}: the hybrid estimator needs a model with a pose_std output (retrain it)")
+        text = net.metadata.get(META_HYBRID)
+        if not text:
+            raise ModelMismatchError(f"{net.path}: no {META_HYBRID} metadata (run superbody calibrate-hybrid on it)")
+        try:
+            self.calibration = HybridCalibration.from_json(text)
+        except (ValueError, KeyError, TypeError) as e:
+            raise ModelMismatchError(f"{net.path}: metadata {META_HYBRID} is invalid: {e}") from None
+        self.net = net
+        self.site = site
+        self.analytic = AnalyticEstimator(site)
+
+    def estimate(self, view_sets: Sequence[Mapping[str, PersonView]]) -> NDArray[np.float64]:
+        return self.estimate_detailed(view_sets).pose
+
+    def estimate_detailed(self, view_sets: Sequence[Mapping[str, PersonView]]) -> Estimates:
+        """Poses, 1-sigmas and, per person, which estimator produced the pose."""
+        if len(view_sets) == 0:
+            return Estimates(np.zeros((0, 3)), np.zeros((0, 3)), ())
+        net, net_std = self.net.estimate_with_std(view_sets)
+        geo, pair = self.analytic.estimate_with_pairs(view_sets)
+        geo_std = self.calibration.analytic_sigmas(np.array([len(v) for v in view_sets]), pair)
+        pose, std = fuse(net, net_std, geo, geo_std)
+        has_geo = np.isfinite(geo[:, :2]).all(1)
+        margin = self.calibration.floor_margin_m
+        outside = ~(_near_floor(net[:, :2], self.site, margin) & np.where(has_geo, _near_floor(np.nan_to_num(geo[:, :2]), self.site, margin), True))
+        source = np.where(~has_geo, "onnx", np.where(outside, "analytic", "hybrid"))
+        pose = np.where((source == "onnx")[:, None], net, np.where((source == "analytic")[:, None], geo, pose))
+        std = np.where((source == "onnx")[:, None], net_std, np.where((source == "analytic")[:, None], geo_std, std))
+        return Estimates(pose, std, tuple(str(s) for s in source))
+
+
+def _near_floor(xy: NDArray, site: Site, margin: float) -> NDArray[np.bool_]:
+    """(B,) points inside the floor polygon, or within ``margin`` of it."""
+    inside = point_in_polygon(xy, site.floor)
+    if margin <= 0 or inside.all():
+        return inside
+    p = np.asarray(site.floor, dtype=np.float64)
+    a, b = p, np.roll(p, -1, axis=0)  # (V, 2) edges a -> b
+    ab = b - a
+    t = np.clip(np.einsum("bvk,vk->bv", xy[:, None] - a[None], ab) / np.maximum((ab**2).sum(1), 1e-12), 0, 1)  # (B, V)
+    d = np.linalg.norm(xy[:, None] - (a[None] + t[..., None] * ab[None]), axis=2).min(1)  # (B,)
+    return inside | (d <= margin)

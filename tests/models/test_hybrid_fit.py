@@ -1,0 +1,122 @@
+"""Calibrating uncertainties (models/hybrid.py), spatial folds (models/crossval.py) and the
+uncertainty head's loss (models/nets.pose_nll)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from superbody.edge.site import load_site  # noqa: E402
+from superbody.models.crossval import spatial_folds  # noqa: E402
+from superbody.models.hybrid import fit_analytic, fit_std_scale, hybrid_poses, leave_one_fold_out, robust_sigma, sigma_coverage  # noqa: E402
+from superbody.models.nets import pose_nll  # noqa: E402
+from tests.conftest import WTF_SITE  # noqa: E402
+
+
+def _gaussian_case(n=4000, true_sigma=(0.1, 0.2, 0.3), claimed=(0.05, 0.4, 0.3), seed=0):
+    rng = np.random.default_rng(seed)
+    truth = np.column_stack([rng.uniform(-1, 1, (n, 2)), rng.uniform(-3, 3, n)])
+    pred = truth + rng.normal(0, 1, (n, 3)) * true_sigma
+    return pred, np.tile(claimed, (n, 1)), truth
+
+
+def test_robust_sigma_of_a_gaussian():
+    e = np.random.default_rng(1).normal(0, 0.25, (20000, 3))
+    np.testing.assert_allclose(robust_sigma(e), 0.25, rtol=0.03)
+
+
+def test_std_scale_makes_claimed_sigmas_honest():
+    pred, std, truth = _gaussian_case()
+    scale = fit_std_scale(pred, std, truth)
+    np.testing.assert_allclose(scale, [2.0, 0.5, 1.0], rtol=0.06)  # over-confident x, timid y, right yaw
+    cov = sigma_coverage(pred, std * scale, truth)
+    np.testing.assert_allclose(cov["within_1_sigma"], 0.683, atol=0.03)
+    np.testing.assert_allclose(cov["within_2_sigma"], 0.954, atol=0.02)
+
+
+def test_std_scale_needs_data():
+    with pytest.raises(ValueError, match="at least 10"):
+        fit_std_scale(np.zeros((3, 3)), np.ones((3, 3)), np.zeros((3, 3)))
+
+
+def test_fit_analytic_by_camera_count_and_pair():
+    rng = np.random.default_rng(2)
+    n = 3000
+    cams = rng.integers(1, 4, n)
+    pair = rng.uniform(size=n) < 0.8
+    sig = np.array([0.3, 0.15, 0.05])[cams - 1]
+    truth = np.zeros((n, 3))
+    pred = rng.normal(0, 1, (n, 3)) * sig[:, None]
+    pred[~pair, 2] = rng.uniform(-np.pi, np.pi, (~pair).sum())  # no pair: yaw is a guess
+    cal = fit_analytic(pred, pair, truth, cams)
+    np.testing.assert_allclose([r[0] for r in cal.analytic_std], [0.3, 0.15, 0.05], rtol=0.12)
+    np.testing.assert_allclose([r[2] for r in cal.analytic_std], [0.3, 0.15, 0.05], rtol=0.12)
+    assert cal.analytic_yaw_std_no_pair > 1.5
+
+
+def test_hybrid_beats_both_when_errors_are_independent():
+    """Two unbiased estimates with independent errors: the fused one is better than either."""
+    site = load_site(WTF_SITE)
+    rng = np.random.default_rng(3)
+    n = 3000
+    truth = np.column_stack([rng.uniform(-1, 1, n), rng.uniform(-2, 0.5, n), rng.uniform(-3, 3, n)])
+    cams = rng.integers(1, 4, n)
+    pair = np.ones(n, bool)
+    net_sig, geo_sig = 0.1, np.array([0.2, 0.1, 0.05])[cams - 1]
+    net = truth + rng.normal(0, net_sig, (n, 3))
+    geo = truth + rng.normal(0, 1, (n, 3)) * geo_sig[:, None]
+    fold = np.arange(n) % 5
+    pose, std, source = leave_one_fold_out(net, np.full((n, 3), net_sig), geo, pair, truth, cams, fold, site)
+    assert (source == "hybrid").mean() > 0.95
+    err = lambda p: np.abs(p[:, 0] - truth[:, 0])  # noqa: E731
+    for k in (1, 2, 3):
+        m = cams == k
+        assert err(pose)[m].mean() <= min(err(net)[m].mean(), err(geo)[m].mean()) * 1.02
+
+
+def test_hybrid_falls_back_to_geometry_off_the_floor():
+    site = load_site(WTF_SITE)
+    net = np.array([[9.0, 9.0, 0.0], [0.0, 0.0, 0.0]])  # the network's first answer is far off the floor
+    geo = np.array([[0.1, 0.1, 0.1], [np.nan, np.nan, 0.0]])  # the geometry found nothing for the second
+    cal = fit_analytic(np.zeros((30, 3)) + 0.01, np.ones(30, bool), np.zeros((30, 3)), np.full(30, 2))
+    pose, std, source = hybrid_poses(net, np.full((2, 3), 0.1), geo, np.array([True, False]), np.array([2, 1]), cal, site)
+    assert source.tolist() == ["analytic", "onnx"]
+    np.testing.assert_allclose(pose, [[0.1, 0.1, 0.1], [0.0, 0.0, 0.0]])
+
+
+def test_spatial_folds_are_regions_with_a_buffer():
+    rng = np.random.default_rng(4)
+    xy = np.concatenate([rng.normal(c, 0.2, (50, 2)) for c in ([0, 0], [3, 0], [0, 3])])
+    folds = spatial_folds(xy, 3, buffer_m=0.3, seed=0)
+    held = [set(h.tolist()) for h, _ in folds]
+    assert sorted(len(h) for h in held) == [50, 50, 50]  # the three blobs
+    assert set().union(*held) == set(range(150))
+    for h, ex in folds:
+        assert set(h.tolist()) <= set(ex.tolist())  # the region is excluded from training
+        d = np.sqrt(((xy[ex][:, None] - xy[h][None]) ** 2).sum(-1)).min(1)
+        assert d.max() <= 0.3 + 1e-9
+
+
+@pytest.mark.parametrize("folds", [1, 151])
+def test_spatial_folds_bad_count(folds):
+    with pytest.raises(ValueError, match="folds must be in"):
+        spatial_folds(np.zeros((150, 2)), folds)
+
+
+def test_pose_nll_is_lowest_at_the_true_sigma_and_never_moves_the_pose():
+    y = torch.tensor([[0.0, 0.0, 0.0, 1.0]])
+    d = 0.2
+    def nll(log_s: float, yaw_err: float = 0.0) -> tuple[float, torch.Tensor]:
+        out = torch.tensor([[d, -d, math.sin(yaw_err), math.cos(yaw_err), log_s, log_s, log_s]], requires_grad=True)
+        loss = pose_nll(out, y).sum()
+        loss.backward()
+        return float(loss), out.grad
+    values = {s: nll(math.log(s))[0] for s in (0.05, 0.1, 0.2, 0.4, 0.8)}
+    # the position part is minimal at sigma = |error|: compare around it
+    assert values[0.2] < values[0.1] and values[0.2] < values[0.4]
+    _, grad = nll(math.log(0.2), 0.5)
+    assert torch.all(grad[0, :4] == 0)  # the means are detached
