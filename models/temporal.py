@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Final, Literal, Mapping, Sequence
+from typing import TYPE_CHECKING, Final, Literal, Mapping, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -51,12 +51,14 @@ from superbody.edge import transport, wire
 from superbody.edge.angles import wrap_angle
 from superbody.edge.colour import HIST_BINS
 from superbody.edge.observation import Observation, PersonView
-from superbody.edge.simulator import NoiseModel, World, render_views
 from superbody.edge.site import Site
 from superbody.host.aggregator import Aggregator, HostConfig
 from superbody.host.estimator import Estimator
 from superbody.models.samples import Sample
 from superbody.models.wtf import RawSample, torso_to_truth
+
+if TYPE_CHECKING:
+    from superbody.edge.simulator import NoiseModel
 
 __all__ = [
     "SIGNATURE",
@@ -364,6 +366,8 @@ def simulated_recording(
     Returns:
         ``(samples, stamps)``: as ``models.wtf.to_samples`` and ``view_stamps`` give for a file.
     """
+    from superbody.edge.simulator import NoiseModel, World, render_views  # OpenCV: only for simulated recordings
+
     if not (0 < duration_s <= 3600 and 0 < rate_hz <= 100):
         raise ValueError(f"simulated_recording: duration_s must be in (0, 3600] and rate_hz in (0, 100], got {duration_s}, {rate_hz}")
     offsets = [7.0 * k for k in range(len(site.cameras))] if camera_offsets_ms is None else list(camera_offsets_ms)
