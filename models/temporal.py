@@ -35,7 +35,10 @@ Which person is the sample's (``SOURCES``):
   2 s, of a recording): the per-frame estimate, as a consumer would have nothing better.
 
 The poses are torso centres, like the per-frame estimates, so ``models.evaluate.summarise``
-(which moves them to the dataset's chest tracker, ``torso_to_truth``) scores both alike.
+(which moves them to the dataset's chest tracker, ``torso_to_truth``) scores both alike, in the
+same buckets: the number of cameras that saw the sample. The host's set S may hold more
+cameras than that (a view stays fresh for ``HostConfig.freshness_s``); ``Replay.views`` says
+how many it held.
 """
 
 from __future__ import annotations
