@@ -217,6 +217,8 @@ _DEFAULT_SITE = "deploy/sites/wtf-apartment.toml"
 _BASELINE = "analytic"
 # The truth offset is a physical distance on a person: anything beyond a metre is a typo.
 _MAX_TRUTH_OFFSET_M = 1.0
+_EVAL_ESTIMATORS = ("onnx", "analytic")
+_TEMPORAL_AT = ("first", "last")  # models.temporal.SCORE_AT, without importing it for --help
 
 
 def _add_eval(sub: argparse._SubParsersAction) -> None:
@@ -234,9 +236,19 @@ def _add_eval(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--dataset", type=Path, required=True, metavar="PATH.json", help="WheresTheFellow JSON file (e.g. dev.json)")
     p.add_argument(
-        "--model", type=Path, action="append", required=True, metavar="M.onnx",
+        "--model", type=Path, action="append", metavar="M.onnx",
         help="ONNX model; repeat to compare several (the first is the one --json-out and --predictions-out report)",
     )
+    p.add_argument("--estimator", choices=_EVAL_ESTIMATORS, default="onnx",
+                   help="onnx: score --model (required); analytic: score the analytic baseline alone, without --model (default: %(default)s)")
+    p.add_argument(
+        "--temporal", action="store_true",
+        help=("also replay the recording in capture-time order through the host's own aggregator (tracker, estimator, "
+              "filter) and score the pose it publishes at each sample's time, beside the per-frame figures; "
+              "--predictions-out then writes these poses"),
+    )
+    p.add_argument("--temporal-at", choices=_TEMPORAL_AT, default="first",
+                   help="with --temporal, score each sample when its first view (its time) or its last view is in (default: %(default)s)")
     p.add_argument("--site", type=Path, default=Path(_DEFAULT_SITE), metavar="SITE.toml", help="site file (default: %(default)s)")
     p.add_argument("--json-out", type=Path, metavar="F", help="write the first model's metrics, the baseline's and the per-camera breakdown as JSON")
     p.add_argument("--predictions-out", type=Path, metavar="F.csv",
@@ -260,17 +272,22 @@ def _run_eval(args: argparse.Namespace) -> int:
     import math
 
     from superbody.edge.site import SiteError, load_site
-    from superbody.models.wtf import DatasetError, load_wtf
+    from superbody.models.wtf import DatasetError, load_wtf_raw, to_samples
 
     command = "eval"
     if not (math.isfinite(args.truth_offset) and abs(args.truth_offset) <= _MAX_TRUTH_OFFSET_M):
         return _fail(command, f"--truth-offset must be metres in [-{_MAX_TRUTH_OFFSET_M:g}, {_MAX_TRUTH_OFFSET_M:g}], got {args.truth_offset}")
     if args.batch_size < 1:
         return _fail(command, f"--batch-size must be >= 1, got {args.batch_size}")
-    names = _model_names(args.model)
-    if len(set(names)) < len(names):
+    paths = args.model or []
+    if args.estimator == _BASELINE and paths:
+        return _fail(command, "--model cannot be combined with --estimator analytic (it scores the analytic estimator alone)")
+    if args.estimator == "onnx" and not paths:
+        return _fail(command, "--model M.onnx is required (or --estimator analytic)")
+    names = _model_names(paths) if paths else [_BASELINE]
+    if paths and len(set(names)) < len(names):
         return _fail(command, f"--model: the same model is given twice: {', '.join(sorted({n for n in names if names.count(n) > 1}))}")
-    if _BASELINE in names:
+    if paths and _BASELINE in names:
         return _fail(command, f"--model {_BASELINE!r}: the name is taken by the baseline; rename the file")
     if args.plots is not None:
         import importlib.util
@@ -279,8 +296,9 @@ def _run_eval(args: argparse.Namespace) -> int:
             return _fail(command, "--plots needs matplotlib (pip install 'superbody[train]')")
     try:
         site = load_site(args.site)
-        samples = load_wtf(args.dataset, site=site)
-        estimators = {name: _load_model(path, site) for name, path in zip(names, args.model)}
+        raw = load_wtf_raw(args.dataset)
+        samples = to_samples(raw, site)
+        estimators = {name: _load_model(path, site) for name, path in zip(names, paths)}
     except (DatasetError, SiteError, ValueError) as e:  # ModelMismatchError is a ValueError
         return _fail(command, str(e))
 
@@ -302,15 +320,27 @@ def _run_eval(args: argparse.Namespace) -> int:
         return _fail(command, str(e))
     reports = score(samples, predictions, args.truth_offset)
     print(f"{args.dataset}: {len(samples)} samples, site {site.name!r}")
-    print(format_table(reports, args.truth_offset))
+    temporal = None
+    if args.temporal:
+        host_names = {name: f"onnx:{path.name}" for name, path in zip(names, paths)}
+        try:
+            temporal = _eval_temporal(args, raw, samples, site, estimators, host_names, predictions)
+        except ValueError as e:
+            return _fail(command, str(e))
+    else:
+        print(format_table(reports, args.truth_offset))
     try:
         if args.json_out is not None:
             doc = json_report(reports, names, _BASELINE, args.truth_offset)
             doc["dataset"], doc["site"] = str(args.dataset), str(args.site)
+            if temporal is not None:
+                doc["temporal"] = dict(json_report(temporal[0], names, _BASELINE, args.truth_offset), at=args.temporal_at,
+                                       replay=temporal[1], signature=_SIGNATURE_NOTE)
             args.json_out.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
             print(f"wrote {args.json_out}")
         if args.predictions_out is not None:
-            write_predictions_csv(args.predictions_out, samples, predictions[names[0]], args.truth_offset)
+            pred = temporal[2][names[0]] if temporal is not None else predictions[names[0]]
+            write_predictions_csv(args.predictions_out, samples, pred, args.truth_offset)
             print(f"wrote {args.predictions_out}")
         if args.plots is not None:
             from superbody.models.plots import write_plots
@@ -320,6 +350,39 @@ def _run_eval(args: argparse.Namespace) -> int:
     except OSError as e:
         return _fail(command, f"{e.filename}: {e.strerror or e}")
     return 0
+
+
+_SIGNATURE_NOTE = "one constant flat hue-saturation histogram on every view (the dataset has no colour)"
+
+
+def _eval_temporal(args, raw, samples, site, estimators: dict, host_names: dict, predictions: dict) -> tuple[dict, dict, dict]:
+    """Replay the recording through the host aggregator per estimator; print per-frame and temporal side by side.
+
+    Returns:
+        ``(temporal reports, replay summaries, temporal poses)``, each keyed by estimator name.
+    """
+    import numpy as np
+
+    from superbody.models.evaluate import format_table, score
+    from superbody.models.temporal import format_replay, replay, replay_summary, view_stamps
+
+    stamps = view_stamps(raw)
+    truth = np.array([s.truth for s in samples])
+    poses, summaries = {}, {}
+    for name, est in estimators.items():
+        rep = replay(samples, stamps, predictions[name], site, est, host_names.get(name, name), at=args.temporal_at)
+        poses[name] = rep.poses
+        summaries[name] = replay_summary(rep, predictions[name], truth, args.truth_offset)
+    reports = score(samples, {**predictions, **{f"{n} temporal": p for n, p in poses.items()}}, args.truth_offset)
+    table = {}
+    for name in estimators:
+        table[f"{name} per-frame"], table[f"{name} temporal"] = reports[name], reports[f"{name} temporal"]
+    print(f"temporal: replayed in capture-time order through the host aggregator (tracker, estimator, filter; host run's "
+          f"defaults), scored at each sample's {args.temporal_at} view; {_SIGNATURE_NOTE}")
+    print(format_table(table, args.truth_offset))
+    for name in estimators:
+        print(format_replay(name, summaries[name]))
+    return {n: reports[f"{n} temporal"] for n in estimators}, summaries, poses
 
 
 def _load_model(path: Path, site):

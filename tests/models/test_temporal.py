@@ -1,0 +1,318 @@
+"""``superbody eval --temporal``: a recording replayed through the host's own aggregator."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import subprocess
+import sys
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from superbody.edge import transport, wire
+from superbody.edge.site import load_site
+from superbody.host.aggregator import HostConfig
+from superbody.host.analytic import AnalyticEstimator
+from superbody.host.filter import FilterConfig
+from superbody.models.evaluate import PREDICTIONS_HEADER, predict, score, write_predictions_csv
+from superbody.models.temporal import (
+    SIGNATURE,
+    jitter,
+    observation_batches,
+    replay,
+    replay_summary,
+    simulated_recording,
+    view_stamps,
+)
+from superbody.models.wtf import TRUTH_OFFSET_M, to_samples
+from tests.conftest import ROOT, WTF_SITE
+
+SITE = load_site(WTF_SITE)
+SHIPPED = ROOT / "models" / "wtf-apartment.int8.onnx"
+# dev.json: samples seen by 1, 2, 3 cameras (its README), and all their views.
+DEV_COUNTS = {"1": 53, "2": 69, "3": 103}
+DEV_VIEWS = 53 + 2 * 69 + 3 * 103
+
+
+@pytest.fixture(scope="module")
+def dev(raw):
+    """dev.json as samples (with camera-frame 3D joints), per-view stamps and analytic per-frame poses."""
+    samples = to_samples(raw, SITE)
+    return samples, view_stamps(raw), predict(samples, AnalyticEstimator(SITE))
+
+
+@pytest.fixture(scope="module")
+def dev_replay(dev):
+    samples, stamps, per_frame = dev
+    return replay(samples, stamps, per_frame, SITE, AnalyticEstimator(SITE), "analytic")
+
+
+# --- observations -------------------------------------------------------------------------------
+
+
+def test_views_become_wire_observations_in_capture_order(raw, dev):
+    samples, stamps, _ = dev
+    n = 12
+    batches = observation_batches(samples[:n], stamps[:n], SITE)
+    times = [t for t, _ in batches]
+    assert times == sorted(set(times))  # increasing, one batch per capture time
+    expected = sorted((t, SITE.camera_index(c), c, i) for i, st in enumerate(stamps[:n]) for c, t in st.items())
+    got = []
+    for t, batch in batches:
+        for key, payload in batch:
+            obs = wire.decode(payload, expected_site=SITE.name)
+            assert key == transport.observation_key(SITE.name, obs.camera) and obs.stamp_ns == t
+            assert (obs.width, obs.height) == (640, 480) and len(obs.people) == 1
+            view = obs.people[0]
+            assert view.points3d is None  # the analytic estimator and the shipped models use no 3D
+            np.testing.assert_allclose(view.histogram, SIGNATURE, atol=1e-5)
+            got.append((t, SITE.camera_index(obs.camera), obs.camera, view))
+    assert [g[:3] for g in got] == [e[:3] for e in expected]
+    for (_, _, cam, view), (_, _, _, i) in zip(got, expected):
+        want = samples[i].views[cam]
+        np.testing.assert_allclose(view.keypoints, want.keypoints, atol=0.006)  # 0.01 px on the wire
+        np.testing.assert_allclose(view.bbox, want.bbox, atol=0.006)
+    # Each camera numbers its frames from 0.
+    seqs = {}
+    for _, batch in batches:
+        for _, payload in batch:
+            obs = wire.decode(payload)
+            seqs.setdefault(obs.camera, []).append(obs.seq)
+    assert all(s == list(range(len(s))) for s in seqs.values())
+
+
+def test_views_of_one_instant_are_one_batch_and_3d_travels_on_request(dev):
+    samples, stamps, _ = dev
+    # Two samples whose views were all captured at one instant: one batch of three, then one of two.
+    st = [dict.fromkeys(samples[0].views, 10**18), dict.fromkeys(samples[2].views, 10**18 + 50_000_000)]
+    batches = observation_batches([samples[0], samples[2]], st, SITE, with_3d=True)
+    assert [(t, len(b)) for t, b in batches] == [(10**18, len(samples[0].views)), (10**18 + 50_000_000, len(samples[2].views))]
+    obs = wire.decode(batches[0][1][0][1])
+    assert obs.people[0].points3d is not None
+    np.testing.assert_allclose(obs.people[0].points3d, samples[0].views[obs.camera].points3d, atol=6e-5, equal_nan=True)
+
+
+@pytest.mark.parametrize(
+    ("case", "message"),
+    [
+        # (what is wrong, text of the error)
+        ("missing_stamp", "stamps for cameras"),
+        ("same_stamp_twice", "another view with the same stamp"),
+        ("unknown_camera", "is not in site 'wtf-apartment'"),
+        ("length", "2 stamp sets for 1 samples"),
+    ],
+)
+def test_bad_recordings_are_refused_with_the_sample_named(case, message, dev):
+    samples, stamps, _ = dev
+    smp, st = [samples[0]], [dict(stamps[0])]
+    if case == "missing_stamp":
+        st[0].pop(next(iter(st[0])))
+    elif case == "same_stamp_twice":
+        smp, st = [samples[0], samples[0]], [st[0], st[0]]
+    elif case == "unknown_camera":
+        smp = [replace(samples[0], views={"9": samples[0].views["2"]})]
+        st = [{"9": 1}]
+    elif case == "length":
+        st = st * 2
+    with pytest.raises(ValueError, match=message):
+        observation_batches(smp, st, SITE)
+
+
+# --- the replay on dev.json ---------------------------------------------------------------------
+
+
+def test_before_anyone_is_confirmed_the_per_frame_estimate_is_scored(dev):
+    samples, stamps, per_frame = dev
+    n = 10  # 1.2 s: the tracker confirms a person after 2 s of matches
+    rep = replay(samples[:n], stamps[:n], per_frame[:n], SITE, AnalyticEstimator(SITE), "analytic")
+    assert list(rep.source) == ["per_frame"] * n and (rep.people == 0).all() and (rep.track_ids == -1).all()
+    np.testing.assert_array_equal(rep.poses, per_frame[:n])
+
+
+def test_dev_json_replay_tracks_one_person_from_every_view(dev, dev_replay):
+    samples, stamps, per_frame = dev
+    rep = dev_replay
+    # Every view of the recording is a valid observation, in order.
+    assert rep.accepted == DEV_VIEWS and rep.rejected == {}
+    # The first ~2 s are per-frame; then the one person is published, mostly from the track holding the sample's view.
+    first = int(np.argmax(rep.source != "per_frame"))
+    assert (rep.source[:first] == "per_frame").all() and (rep.source[first:] != "per_frame").all()
+    t_confirm = (samples[first].stamp_ns - samples[0].stamp_ns) / 1e9
+    assert 2.0 <= t_confirm <= 3.0, t_confirm
+    assert (rep.source[first:] == "track").mean() >= 0.95  # measured 202 of 208; the rest "nearest"
+    assert set(rep.people[first:]) == {1} and len(set(rep.track_ids[first:])) == 1
+    assert set(rep.views[first:]) <= {1, 2, 3}
+    # Set S and the filter make the published pose differ from the per-frame estimate.
+    moved = np.linalg.norm(rep.poses[first:, :2] - per_frame[first:, :2], axis=1)
+    assert np.median(moved) > 0.01 and np.isfinite(rep.poses).all()
+
+
+def test_dev_json_temporal_analytic_is_sane_and_smoother(dev, dev_replay):
+    samples, _, per_frame = dev
+    reports = score(samples, {"pf": per_frame, "tp": dev_replay.poses}, TRUTH_OFFSET_M)
+    pf, tp = reports["pf"], reports["tp"]
+    assert {k: v["samples"] for k, v in tp["by_cameras"].items()} == DEV_COUNTS and tp["failed"] == 0
+    # Measured: per-frame x/y 79/97 mm, yaw 13.8 deg; temporal 84/85 mm, 10.5 deg.
+    for axis in ("x", "y"):
+        assert 0 < tp["position_mae_mm"][axis] <= 1.5 * pf["position_mae_mm"][axis]
+    assert 0 < tp["yaw_mae_deg"] <= 1.5 * pf["yaw_mae_deg"]
+    truth = np.array([s.truth for s in samples])
+    summary = replay_summary(dev_replay, per_frame, truth, TRUTH_OFFSET_M)
+    assert sum(summary["source"].values()) == len(samples) and summary["accepted"] == DEV_VIEWS
+    jit = summary["jitter"]  # measured: 189 mm, 31 deg per frame; 56 mm, 9 deg temporal
+    assert jit["temporal"]["position_mm"] < 0.6 * jit["per_frame"]["position_mm"]
+    assert jit["temporal"]["yaw_deg"] < 0.6 * jit["per_frame"]["yaw_deg"]
+
+
+def test_scoring_once_the_last_view_is_in_sees_every_view_of_the_sample(dev):
+    samples, stamps, per_frame = dev
+    n = 60
+    est = AnalyticEstimator(SITE)
+    last = replay(samples[:n], stamps[:n], per_frame[:n], SITE, est, "analytic", at="last")
+    first = replay(samples[:n], stamps[:n], per_frame[:n], SITE, est, "analytic", at="first")
+    tracked = (last.source == "track") & (first.source == "track")
+    assert tracked.sum() > 20
+    # At its last view the person's set S holds a view from every camera of the sample.
+    counts = np.array([len(s.views) for s in samples[:n]])
+    assert (last.views[tracked] >= counts[tracked]).all()
+    # The two differ exactly where the sample's views came at different times (the later ones re-estimate).
+    spans = np.array([max(st.values()) - min(st.values()) for st in stamps[:n]])
+    differ = (first.poses != last.poses).any(axis=1)
+    assert not differ[tracked & (spans == 0)].any()
+    assert differ[tracked & (spans > 0)].mean() > 0.8
+    with pytest.raises(ValueError, match="at must be one of first, last"):
+        replay(samples[:2], stamps[:2], per_frame[:2], SITE, est, "analytic", at="middle")
+
+
+# --- jitter -------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("pred", "truth", "mask", "expected"),
+    [
+        # (predictions, truths, mask, (position mm, yaw deg, pairs))
+        ([[0.1, 0, 0], [1.1, 0, 0], [2.1, 0, 0]], [[0, 0, 0], [1, 0, 0], [2, 0, 0]], None, (0.0, 0.0, 2)),  # constant bias
+        ([[0.01, 0, 0], [0.99, 0, 0], [2.01, 0, 0]], [[0, 0, 0], [1, 0, 0], [2, 0, 0]], None, (20.0, 0.0, 2)),  # +-10 mm
+        ([[0, 0, math.radians(175)], [0, 0, math.radians(-175)]], [[0, 0, 0], [0, 0, 0]], None, (0.0, 10.0, 1)),  # yaw wraps
+        ([[0, 0, 0], [np.nan, 0, 0], [0.03, 0.04, 0]], [[0, 0, 0]] * 3, None, (None, None, 0)),  # no finite pair
+        ([[0, 0, 0], [0.03, 0.04, 0], [5, 5, 0]], [[0, 0, 0]] * 3, [True, True, False], (50.0, 0.0, 1)),  # masked out
+        ([], [], None, (None, None, 0)),  # empty
+    ],
+)
+def test_jitter(pred, truth, mask, expected):
+    j = jitter(np.array(pred, dtype=float).reshape(-1, 3), np.array(truth, dtype=float).reshape(-1, 3), 0.0, mask)
+    got = (j["position_mm"], j["yaw_deg"], j["pairs"])
+    assert got[2] == expected[2]
+    for g, e in zip(got[:2], expected[:2]):
+        assert (g is None and e is None) or g == pytest.approx(e, abs=1e-6)
+
+
+# --- a simulated recording: the truth known exactly ---------------------------------------------
+
+
+def test_filtering_reduces_jitter_on_a_simulated_walk():
+    samples, stamps = simulated_recording(SITE, duration_s=20.0, rate_hz=8.0, seed=0)
+    assert 140 <= len(samples) <= 160 and all(min(st.values()) == s.stamp_ns for s, st in zip(samples, stamps))
+    est = AnalyticEstimator(SITE)
+    per_frame = predict(samples, est)
+    filtered = replay(samples, stamps, per_frame, SITE, est, "analytic")
+    unfiltered = replay(samples, stamps, per_frame, SITE, est, "analytic", HostConfig(filter=FilterConfig(enabled=False)))
+    truth = np.array([s.truth for s in samples])
+    tracked = (filtered.source == "track") & (unfiltered.source == "track")
+    assert tracked.sum() >= 120
+    j_pf, j_raw, j_kf = (jitter(p, truth, 0.0, tracked) for p in (per_frame, unfiltered.poses, filtered.poses))
+    # Measured: per-frame 70 mm, 51 deg; host without filter 73 mm, 40 deg; with the filter 55 mm, 29 deg.
+    for key in ("position_mm", "yaw_deg"):
+        assert j_kf[key] < 0.9 * j_raw[key], (key, j_kf, j_raw)
+        assert j_kf[key] < 0.9 * j_pf[key], (key, j_kf, j_pf)
+    # The filtered pose still follows the walk (measured 30/55 mm, 14 deg; per frame 12/23 mm, 14 deg).
+    rep = score(samples, {"tp": filtered.poses}, 0.0)["tp"]
+    assert max(rep["position_mae_mm"].values()) < 100 and rep["yaw_mae_deg"] < 20
+
+
+def test_simulated_recording_rejects_bad_arguments():
+    with pytest.raises(ValueError, match="camera_offsets_ms needs 3 values"):
+        simulated_recording(SITE, 1.0, camera_offsets_ms=[0, 1])
+    with pytest.raises(ValueError, match="duration_s must be in"):
+        simulated_recording(SITE, 0.0)
+
+
+# --- the command --------------------------------------------------------------------------------
+
+
+def _eval(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "superbody.edge.cli", "eval", *args], cwd=ROOT, capture_output=True, text=True, timeout=120)
+
+
+def _finite_report(block: dict) -> bool:
+    values = [*block["position_mae_mm"].values(), block["yaw_mae_deg"], *block["paper_mse"].values()]
+    return all(v is not None and math.isfinite(v) for v in values)
+
+
+def test_cli_temporal_with_the_shipped_model(dev_json, tmp_path):
+    out, csv_out = tmp_path / "r.json", tmp_path / "p.csv"
+    proc = _eval("--dataset", str(dev_json), "--model", str(SHIPPED), "--temporal", "--json-out", str(out), "--predictions-out", str(csv_out))
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    for row in ("wtf-apartment.int8.onnx per-frame", "wtf-apartment.int8.onnx temporal", "analytic per-frame", "analytic temporal"):
+        assert sum(f"  {row}  " in line for line in lines) == 6, row  # a table line per metric
+    assert "3 cams (n=103)" in proc.stdout and "jitter per-frame" in proc.stdout
+    doc = json.loads(out.read_text())
+    temporal = doc["temporal"]
+    assert temporal["model"] == SHIPPED.name and temporal["at"] == "first" and "constant" in temporal["signature"]
+    assert {k: v["samples"] for k, v in temporal["by_cameras"].items()} == DEV_COUNTS
+    assert set(temporal["replay"]) == {SHIPPED.name, "analytic"}
+    for name, rep in temporal["models"].items():
+        per_frame = doc["models"][name]
+        assert rep["samples"] == 225 and rep["failed"] == 0 and _finite_report(rep)
+        # A sanity bound, not a target; measured per-frame 54/62 mm 5.1 deg, temporal 66/64 mm 5.6 deg.
+        for axis in ("x", "y"):
+            assert rep["position_mae_mm"][axis] <= 1.5 * per_frame["position_mae_mm"][axis]
+    base, base_pf = temporal["baseline"], doc["baseline"]
+    for axis in ("x", "y"):
+        assert base["position_mae_mm"][axis] <= 1.5 * base_pf["position_mae_mm"][axis]
+    assert temporal["replay"]["analytic"]["rejected"] == {} and temporal["replay"]["analytic"]["accepted"] == DEV_VIEWS
+    rows = list(csv.reader(csv_out.open()))
+    assert tuple(rows[0]) == PREDICTIONS_HEADER and len(rows) == 226
+    assert all(math.isfinite(float(v)) for r in rows[1:] for v in r[2:])
+
+
+def test_cli_temporal_analytic_writes_the_host_poses(dev_json, dev, tmp_path):
+    samples, stamps, per_frame = dev
+    csv_out, out = tmp_path / "p.csv", tmp_path / "r.json"
+    proc = _eval("--dataset", str(dev_json), "--estimator", "analytic", "--temporal", "--predictions-out", str(csv_out), "--json-out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    assert "analytic per-frame" in proc.stdout and "analytic temporal" in proc.stdout and "onnx" not in proc.stdout
+    doc = json.loads(out.read_text())
+    assert doc["model"] == "analytic" and set(doc["temporal"]["models"]) == {"analytic"}
+    # The CSV holds the replay's poses: per-frame ones before the person is confirmed, then the host's.
+    rep = replay(samples, stamps, per_frame, SITE, AnalyticEstimator(SITE), "analytic")
+    expected = tmp_path / "expected.csv"
+    write_predictions_csv(expected, samples, rep.poses, TRUTH_OFFSET_M)
+    assert csv_out.read_text() == expected.read_text()
+    per_frame_csv = tmp_path / "per_frame.csv"
+    write_predictions_csv(per_frame_csv, samples, per_frame, TRUTH_OFFSET_M)
+    got, pf = csv_out.read_text().splitlines(), per_frame_csv.read_text().splitlines()
+    first = int(np.argmax(rep.source != "per_frame"))
+    assert got[: first + 1] == pf[: first + 1] and got[first + 1 :] != pf[first + 1 :]
+
+
+@pytest.mark.parametrize(
+    ("extra", "expected"),
+    [
+        # (arguments after --dataset, text of the one-line error)
+        (["--estimator", "analytic", "--model", str(SHIPPED), "--temporal"], "--model cannot be combined with --estimator analytic"),
+        (["--temporal"], "--model M.onnx is required (or --estimator analytic)"),
+    ],
+)
+def test_cli_temporal_bad_arguments_are_one_line_exit_2(extra, expected, dev_json, tmp_path, capsys):
+    from superbody.edge.cli import main
+
+    json_out = tmp_path / "r.json"
+    code = main(["eval", "--dataset", str(dev_json), "--json-out", str(json_out), *extra])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and err[0].startswith(f"superbody eval: error: {expected}"), err
+    assert not json_out.exists()
