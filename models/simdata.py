@@ -27,7 +27,7 @@ from tqdm import tqdm
 from superbody.edge.camera import Camera, look_at_rotation
 from superbody.edge.observation import PersonView
 from superbody.edge.angles import wrap_angle
-from superbody.edge.simulator import NoiseModel, PersonState, World, _FreeSpace, render_views
+from superbody.edge.simulator import NoiseModel, PersonState, World, _free_space, render_views
 from superbody.edge.site import Obstacle, Site
 from superbody.models.samples import Sample
 
@@ -92,7 +92,7 @@ def _chunk(site: Site, config: SimDataConfig, index: int, count: int) -> list[Sa
     world = World(site, people, seed=int(rng.integers(0, 2**31)))
     out: list[Sample] = []
     apps = [p.appearance for p in world.people]
-    free = _placement_space(site)
+    free = _free_space(site)
     while len(out) < count:
         t = float(rng.uniform(0, 1e5))
         states = world.states(t)
@@ -111,19 +111,6 @@ def _chunk(site: Site, config: SimDataConfig, index: int, count: int) -> list[Sa
             if len(out) == count:
                 break
     return out
-
-
-_PLACE_CACHE: dict[int, tuple[Site, _FreeSpace]] = {}
-
-
-def _placement_space(site: Site) -> _FreeSpace:
-    """Free floor for placed people: up to 0.1 m from the floor's edge (walks keep a wider
-    berth, so that people do not brush the walls; placement must reach the edges too)."""
-    hit = _PLACE_CACHE.get(id(site))
-    if hit is None or hit[0] is not site:
-        hit = (site, _FreeSpace(site, margin=0.1))
-        _PLACE_CACHE[id(site)] = hit
-    return hit[1]
 
 
 def _placed(states: list[PersonState], free, rng: np.random.Generator, clearance_m: float = 0.6) -> list[PersonState]:
