@@ -217,7 +217,7 @@ _DEFAULT_SITE = "deploy/sites/wtf-apartment.toml"
 _BASELINE = "analytic"
 # The truth offset is a physical distance on a person: anything beyond a metre is a typo.
 _MAX_TRUTH_OFFSET_M = 1.0
-_EVAL_ESTIMATORS = ("onnx", "analytic")
+_EVAL_ESTIMATORS = ("onnx", "analytic")  # onnx: each --model as the host runs it (hybrid when it carries a calibration)
 _TEMPORAL_AT = ("first", "last")  # models.temporal.SCORE_AT, without importing it for --help
 
 
@@ -303,14 +303,18 @@ def _run_eval(args: argparse.Namespace) -> int:
         return _fail(command, str(e))
 
     from superbody.host.analytic import AnalyticEstimator
+    from superbody.host.hybrid import HybridEstimator
     from superbody.models.evaluate import format_table, json_report, predict, score, write_predictions_csv
 
-    from superbody.host.hybrid import HybridEstimator
-
     # A hybrid model is also scored as its network alone, to show what the fusion adds.
-    for name in names:
+    host_names = {}
+    for name, path in zip(names, paths):
         if isinstance(estimators[name], HybridEstimator):
+            host_names[name] = f"hybrid:{path.name}"
             estimators[f"{name} (network)"] = estimators[name].net
+            host_names[f"{name} (network)"] = f"onnx:{path.name}"
+        else:
+            host_names[name] = f"onnx:{path.name}"
     estimators[_BASELINE] = AnalyticEstimator(site)
     try:
         predictions = {
@@ -322,7 +326,6 @@ def _run_eval(args: argparse.Namespace) -> int:
     print(f"{args.dataset}: {len(samples)} samples, site {site.name!r}")
     temporal = None
     if args.temporal:
-        host_names = {name: f"onnx:{path.name}" for name, path in zip(names, paths)}
         try:
             temporal = _eval_temporal(args, raw, samples, site, estimators, host_names, predictions)
         except ValueError as e:
