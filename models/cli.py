@@ -59,6 +59,9 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--name", default="wtf-apartment", help="site name (default: %(default)s)")
     d.add_argument("--fps", type=float, default=15.0, help="publishing rate written for each camera (default: %(default)s)")
     d.set_defaults(func=_run_calibrate_from_dataset)
+    from superbody.models import board_calibration  # `calibrate board` and `calibrate intrinsics`; OpenCV loads on run
+
+    board_calibration.register(csub)
 
 
 _FPS_NOTE = """\
