@@ -344,16 +344,17 @@ def detect_corners(image: NDArray[np.uint8], spec: BoardSpec, cam: Camera | None
 
 
 def _check_spread(corners: Corners, spec: BoardSpec, need: int, what: str) -> None:
+    what = f"{what}: " if what else ""
     if len(corners) < need:
         raise BoardError(
-            f"{what}: found {len(corners)} ChArUco corners ({corners.markers} markers), need at least {need}: "
+            f"{what}found {len(corners)} ChArUco corners ({corners.markers} markers), need at least {need}: "
             f"is the board ({spec.squares_x}x{spec.squares_y} {spec.dictionary}) in view, lit, flat and not too oblique?"
         )
     xy = corners.object_points[:, :2]
     # Collinear corners leave the rotation about their line unobserved.
     spread = np.linalg.svd(xy - xy.mean(axis=0), compute_uv=False)
     if spread[1] < 1e-3 * spec.square_m:
-        raise BoardError(f"{what}: the {len(corners)} corners found lie on one line; show more of the board")
+        raise BoardError(f"{what}the {len(corners)} corners found lie on one line; show more of the board")
 
 
 def solve_board_pose(object_points: NDArray, pixels: NDArray, cam: Camera) -> BoardPose:
@@ -424,7 +425,7 @@ def calibrate_pose(image: NDArray[np.uint8], spec: BoardSpec, cam: Camera, origi
     if (w, h) != (cam.width, cam.height):
         raise BoardError(f"image is {w}x{h} but camera {cam.id!r} is {cam.width}x{cam.height} in the site")
     corners = detect_corners(image, spec, cam)
-    _check_spread(corners, spec, MIN_CORNERS, "board")
+    _check_spread(corners, spec, MIN_CORNERS, "")
     pose = solve_board_pose(corners.object_points, corners.pixels, cam)
     if pose.reprojection_px > MAX_REPROJECTION_PX:
         raise BoardError(
