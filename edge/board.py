@@ -357,22 +357,8 @@ def _check_spread(corners: Corners, spec: BoardSpec, need: int, what: str) -> No
         raise BoardError(f"{what}the {len(corners)} corners found lie on one line; show more of the board")
 
 
-def solve_board_pose(object_points: NDArray, pixels: NDArray, cam: Camera) -> BoardPose:
-    """The board's pose in the camera from its corners.
-
-    IPPE gives both poses a planar target allows; each is refined by Levenberg-Marquardt on
-    the reprojection error and the better one is kept.
-
-    Args:
-        object_points: corners in the board frame, shape (N, 3), z = 0, N >= 4.
-        pixels: their image positions, shape (N, 2).
-        cam: the camera (intrinsics and distortion are used, not its pose).
-
-    Returns:
-        The pose and its RMS reprojection error.
-    """
-    obj = np.asarray(object_points, dtype=np.float64).reshape(-1, 1, 3)
-    img = np.asarray(pixels, dtype=np.float64).reshape(-1, 1, 2)
+def _fit_planar(obj: NDArray[np.float64], img: NDArray[np.float64], cam: Camera) -> tuple[NDArray, NDArray, NDArray[np.float64]]:
+    """Best of IPPE's two poses after Levenberg-Marquardt: (rvec, tvec, residuals (N,) in pixels)."""
     n, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, img, cam.K, cam.D, flags=cv2.SOLVEPNP_IPPE)
     if n == 0:
         raise BoardError("no pose fits the corners found")
@@ -380,12 +366,45 @@ def solve_board_pose(object_points: NDArray, pixels: NDArray, cam: Camera) -> Bo
     for rvec, tvec in zip(rvecs, tvecs):
         rvec, tvec = cv2.solvePnPRefineLM(obj, img, cam.K, cam.D, rvec.copy(), tvec.copy())
         proj, _ = cv2.projectPoints(obj, rvec, tvec, cam.K, cam.D)
-        rms = float(np.sqrt(np.mean(np.sum((proj - img) ** 2, axis=2))))
-        if tvec[2, 0] > 0 and (best is None or rms < best[0]):
-            best = (rms, rvec, tvec)
+        residuals = np.linalg.norm((proj - img).reshape(-1, 2), axis=1)
+        if tvec[2, 0] > 0 and (best is None or np.sum(residuals**2) < np.sum(best[2] ** 2)):
+            best = (rvec, tvec, residuals)
     if best is None:
         raise BoardError("every pose that fits the corners puts the board behind the camera")
-    rms, rvec, tvec = best
+    return best
+
+
+# A corner further than this from the fit, and than 3 times the median, is dropped: a
+# marker's border blurred into the corner (far, small squares) pulls it by up to a pixel.
+_OUTLIER_PX: Final[float] = 0.4
+
+
+def solve_board_pose(object_points: NDArray, pixels: NDArray, cam: Camera) -> BoardPose:
+    """The board's pose in the camera from its corners.
+
+    IPPE gives both poses a planar target allows; each is refined by Levenberg-Marquardt on
+    the reprojection error and the better one is kept. Corners that fit much worse than the
+    rest (over 0.4 px and 3 times the median) are dropped and the pose solved again, up to
+    three times, as long as ``MIN_CORNERS`` remain.
+
+    Args:
+        object_points: corners in the board frame, shape (N, 3), z = 0, N >= 4.
+        pixels: their image positions, shape (N, 2).
+        cam: the camera (intrinsics and distortion are used, not its pose).
+
+    Returns:
+        The pose, the RMS reprojection error of the corners kept and their number.
+    """
+    obj = np.asarray(object_points, dtype=np.float64).reshape(-1, 1, 3)
+    img = np.asarray(pixels, dtype=np.float64).reshape(-1, 1, 2)
+    rvec, tvec, residuals = _fit_planar(obj, img, cam)
+    for _ in range(3):
+        keep = residuals <= max(_OUTLIER_PX, 3.0 * float(np.median(residuals)))
+        if keep.all() or keep.sum() < MIN_CORNERS:
+            break
+        obj, img = obj[keep], img[keep]
+        rvec, tvec, residuals = _fit_planar(obj, img, cam)
+    rms = float(np.sqrt(np.mean(residuals**2)))
     return BoardPose(R=cv2.Rodrigues(rvec)[0], t=tvec.reshape(3), reprojection_px=rms, corners=len(obj))
 
 

@@ -46,7 +46,8 @@ def register(csub: argparse._SubParsersAction) -> None:
     b.add_argument("--camera", required=True, metavar="ID", help="camera id in the site")
     b.add_argument("--image", type=Path, required=True, metavar="IMG.png", help="image of the board from that camera")
     _add_board_flags(b)
-    b.add_argument("--origin", required=True, metavar="X,Y", help="the board's origin corner on the floor, world metres")
+    b.add_argument("--origin", required=True, metavar="X,Y",
+                   help="the board's origin corner on the floor, world metres (write --origin=-1.5,2 when X is negative)")
     b.add_argument("--yaw", required=True, metavar="DEG", help="direction of the board's x axis, degrees counter-clockwise from world +x")
     b.add_argument("--out", type=Path, metavar="SITE.toml", help="write the site with this camera's pose replaced (may be --site)")
     b.add_argument("--json-out", type=Path, metavar="F",

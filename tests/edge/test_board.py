@@ -170,6 +170,21 @@ def test_solve_board_pose_on_exact_corners(position, target, dist):
     assert np.allclose(position_w, cam.t, atol=1e-7) and _angle_deg(rotation, cam.R) < 1e-5
 
 
+def test_solve_board_pose_drops_corners_that_fit_much_worse():
+    cam = _camera((0.4, -2.0, 2.2), (0.4, 0.6, 0.0))
+    obj = make_board(SPEC).getChessboardCorners().astype(np.float64)
+    R_wb, t_wb = board_to_world((0.0, 0.0), 0.0)
+    uv, _ = project(obj @ R_wb.T + t_wb, cam)
+    uv[[3, 17]] += [[1.5, -0.8], [-1.0, 1.2]]  # two corners pulled by a blurred marker border
+    pose = solve_board_pose(obj, uv, cam)
+    assert pose.corners == len(obj) - 2 and pose.reprojection_px < 1e-6
+    rotation, position = camera_pose_in_world(pose, (0.0, 0.0), 0.0)
+    assert np.allclose(position, cam.t, atol=1e-7)
+    # With only MIN_CORNERS corners nothing is dropped: the error shows in the RMS instead.
+    few = solve_board_pose(obj[:MIN_CORNERS], np.vstack([uv[:3], uv[3:MIN_CORNERS]]), cam)
+    assert few.corners == MIN_CORNERS and few.reprojection_px > 0.1
+
+
 # --- rendered boards ----------------------------------------------------------------------------
 
 
