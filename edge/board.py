@@ -6,8 +6,8 @@ with sub-pixel positions. Two uses:
 
 - **Extrinsics** (``calibrate_pose``): with the camera's intrinsics known (site file, OAK
   device), the corners of one image give the board's pose in the camera (``solve_board_pose``:
-  IPPE for a planar target, both of its solutions tried, then Levenberg-Marquardt), and the
-  board's known place on the floor turns it into the camera's pose in the world.
+  IPPE's two planar solutions and SQPnP's, each refined by Levenberg-Marquardt, the best
+  kept), and the board's known place on the floor turns it into the camera's pose.
 - **Intrinsics** (``calibrate_intrinsics``): corners from several views of the board give K and
   the distortion coefficients (Zhang's method, ``cv2.calibrateCamera``), for webcams.
 
@@ -42,6 +42,9 @@ from superbody.edge.camera import Camera
 __all__ = [
     "DICTIONARIES",
     "MIN_CORNERS",
+    "MIN_VIEWS",
+    "MAX_REPROJECTION_PX",
+    "MAX_OBLIQUE_DEG",
     "BoardError",
     "BoardSpec",
     "Corners",
@@ -57,10 +60,10 @@ __all__ = [
     "solve_board_pose",
     "camera_pose_in_world",
     "calibrate_pose",
+    "pose_from_corners",
     "calibrate_intrinsics",
     "render_board",
 ]
-
 
 
 def _dictionary_names() -> tuple[str, ...]:
@@ -358,12 +361,17 @@ def _check_spread(corners: Corners, spec: BoardSpec, need: int, what: str) -> No
 
 
 def _fit_planar(obj: NDArray[np.float64], img: NDArray[np.float64], cam: Camera) -> tuple[NDArray, NDArray, NDArray[np.float64]]:
-    """Best of IPPE's two poses after Levenberg-Marquardt: (rvec, tvec, residuals (N,) in pixels)."""
-    n, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, img, cam.K, cam.D, flags=cv2.SOLVEPNP_IPPE)
-    if n == 0:
+    """Best of IPPE's two poses and SQPnP's after Levenberg-Marquardt: (rvec, tvec, residuals (N,) px)."""
+    starts = []
+    # IPPE gives both planar poses; SQPnP (global for any points) covers the exactly symmetric
+    # views where IPPE's homography step returns NaN.
+    for flags in (cv2.SOLVEPNP_IPPE, cv2.SOLVEPNP_SQPNP):
+        _, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, img, cam.K, cam.D, flags=flags)
+        starts += [(r, t) for r, t in zip(rvecs, tvecs) if np.isfinite(r).all() and np.isfinite(t).all()]
+    if not starts:
         raise BoardError("no pose fits the corners found")
     best = None
-    for rvec, tvec in zip(rvecs, tvecs):
+    for rvec, tvec in starts:
         rvec, tvec = cv2.solvePnPRefineLM(obj, img, cam.K, cam.D, rvec.copy(), tvec.copy())
         proj, _ = cv2.projectPoints(obj, rvec, tvec, cam.K, cam.D)
         residuals = np.linalg.norm((proj - img).reshape(-1, 2), axis=1)
@@ -382,8 +390,8 @@ _OUTLIER_PX: Final[float] = 0.4
 def solve_board_pose(object_points: NDArray, pixels: NDArray, cam: Camera) -> BoardPose:
     """The board's pose in the camera from its corners.
 
-    IPPE gives both poses a planar target allows; each is refined by Levenberg-Marquardt on
-    the reprojection error and the better one is kept. Corners that fit much worse than the
+    IPPE gives both poses a planar target allows (SQPnP one more); each is refined by
+    Levenberg-Marquardt on the reprojection error and the best is kept. Corners that fit much worse than the
     rest (over 0.4 px and 3 times the median) are dropped and the pose solved again, up to
     three times, as long as ``MIN_CORNERS`` remain.
 
@@ -443,7 +451,22 @@ def calibrate_pose(image: NDArray[np.uint8], spec: BoardSpec, cam: Camera, origi
     h, w = image.shape[:2]
     if (w, h) != (cam.width, cam.height):
         raise BoardError(f"image is {w}x{h} but camera {cam.id!r} is {cam.width}x{cam.height} in the site")
-    corners = detect_corners(image, spec, cam)
+    return pose_from_corners(detect_corners(image, spec, cam), spec, cam, origin_xy, yaw)
+
+
+def pose_from_corners(corners: Corners, spec: BoardSpec, cam: Camera, origin_xy: Sequence[float], yaw: float) -> PoseFit:
+    """A camera's pose in the world from the board's corners found in its image.
+
+    Args:
+        corners: the corners, from ``detect_corners``.
+        spec: the board.
+        cam: the camera, with its intrinsics (its pose is not used).
+        origin_xy: the board's origin on the floor, metres.
+        yaw: the direction of the board's x axis, radians counter-clockwise from world +x.
+
+    Raises:
+        BoardError: too few or collinear corners, a poor fit or a view too oblique to trust.
+    """
     _check_spread(corners, spec, MIN_CORNERS, "")
     pose = solve_board_pose(corners.object_points, corners.pixels, cam)
     if pose.reprojection_px > MAX_REPROJECTION_PX:
@@ -459,7 +482,7 @@ def calibrate_pose(image: NDArray[np.uint8], spec: BoardSpec, cam: Camera, origi
     if oblique > MAX_OBLIQUE_DEG:
         raise BoardError(
             f"the board is seen {oblique:.0f} deg from its normal, allowed <= {MAX_OBLIQUE_DEG:.0f}: "
-            "lay it closer to the camera"
+            "lay it nearer the camera or raise the camera"
         )
     rotation, position = camera_pose_in_world(pose, origin_xy, yaw)
     return PoseFit(position, rotation, pose.reprojection_px, pose.corners, oblique)

@@ -10,6 +10,8 @@ import pytest
 
 from superbody.edge.board import (
     DICTIONARIES,
+    MAX_OBLIQUE_DEG,
+    Corners,
     MIN_CORNERS,
     BoardError,
     BoardSpec,
@@ -22,6 +24,7 @@ from superbody.edge.board import (
     make_board,
     parse_squares,
     placement_in_front,
+    pose_from_corners,
     render_board,
     solve_board_pose,
 )
@@ -183,6 +186,42 @@ def test_solve_board_pose_drops_corners_that_fit_much_worse():
     # With only MIN_CORNERS corners nothing is dropped: the error shows in the RMS instead.
     few = solve_board_pose(obj[:MIN_CORNERS], np.vstack([uv[:3], uv[3:MIN_CORNERS]]), cam)
     assert few.corners == MIN_CORNERS and few.reprojection_px > 0.1
+
+
+def _exact_corners(cam: Camera, origin, yaw, ids=None, noise_px: float = 0.0) -> Corners:
+    obj = make_board(SPEC).getChessboardCorners().astype(np.float64)
+    ids = np.arange(len(obj)) if ids is None else np.asarray(ids)
+    R_wb, t_wb = board_to_world(origin, yaw)
+    uv, _ = project(obj[ids] @ R_wb.T + t_wb, cam)
+    uv += np.random.default_rng(0).normal(0.0, noise_px, uv.shape) if noise_px else 0.0
+    return Corners(ids.astype(np.int32), uv, obj[ids], markers=17)
+
+
+CORNER_FAILURES = [
+    # (name, camera position, corner ids kept, pixel noise, text of the error)
+    ("grazing view: camera 0.3 m up, board 2.4 m away", (0.4, -3.0, 0.3), None, 0.0, "deg from its normal, allowed <= 80"),
+    ("five corners", (0.4, -2.0, 2.2), [0, 1, 2, 5, 9], 0.0, "found 5 ChArUco corners (17 markers), need at least 6"),
+    ("corners on one row", (0.4, -2.0, 2.2), [0, 1, 2, 3], 0.0, "need at least 6"),
+    ("corners on one column", (0.4, -2.0, 2.2), [1, 5, 9, 13, 17, 21], 0.0, "lie on one line"),
+    ("corners 6 px off: wrong intrinsics or board", (0.4, -2.0, 2.2), None, 6.0, "reproject with RMS"),
+]
+
+
+@pytest.mark.parametrize(("name", "position", "ids", "noise", "message"), CORNER_FAILURES, ids=[c[0] for c in CORNER_FAILURES])
+def test_pose_from_corners_refuses(name, position, ids, noise, message):
+    cam = _camera(position, (0.4, 0.6, 0.0))
+    with pytest.raises(BoardError) as e:
+        pose_from_corners(_exact_corners(cam, (0.0, 0.0), 0.0, ids, noise), SPEC, cam, (0.0, 0.0), 0.0)
+    assert message in str(e.value)
+
+
+def test_pose_from_corners_reports_the_viewing_angle():
+    cam = _camera((0.4, -2.0, 2.2), (0.4, 0.6, 0.0))
+    fit = pose_from_corners(_exact_corners(cam, (0.0, 0.0), 0.0), SPEC, cam, (0.0, 0.0), 0.0)
+    # The line of sight to the board's centre (0.4, -0.56, 0) against the floor's normal.
+    expected = math.degrees(math.atan2(math.hypot(0.0, -0.56 + 2.0), 2.2))
+    assert fit.oblique_deg == pytest.approx(expected, abs=1e-6) and fit.oblique_deg < MAX_OBLIQUE_DEG
+    assert np.allclose(fit.position, cam.t, atol=1e-7) and fit.corners == SPEC.n_corners
 
 
 # --- rendered boards ----------------------------------------------------------------------------
