@@ -76,6 +76,9 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
     h.add_argument("--model", type=Path, action="append", default=[], metavar="M.onnx", help="model to write the calibration into (repeatable)")
     h.add_argument("--json-out", type=Path, metavar="F", help="write the calibration, coverage and scores as JSON")
     h.set_defaults(func=_run_calibrate_hybrid)
+    from superbody.models import board_calibration  # `calibrate board` and `calibrate intrinsics`; OpenCV loads on run
+
+    board_calibration.register(csub)
 
 
 _FPS_NOTE = """\
