@@ -156,7 +156,7 @@ def open_device(dai, device_id: str | None):
     if device_id is None:
         found = dai.Device.getAllAvailableDevices()
         if not found:
-            raise SourceError(f"{label}: no OAK device found (USB or network); plug one in or pass oak:DEVICE_ID")
+            raise SourceError(f"{label}: no OAK device found (USB or network); plug one in, or name it (oak:DEVICE_ID, --device)")
         info = found[0]
     else:
         info = dai.DeviceInfo(device_id)

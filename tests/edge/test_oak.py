@@ -381,3 +381,159 @@ def test_zoo_model_offline_and_uncached_is_a_clear_error(tmp_path, monkeypatch):
         oak.load_nn_archive(dai, oak.DEFAULT_MODEL, None, "RVC2", tmp_path / "cache")
     with pytest.raises(SourceError, match="must look like OWNER/MODEL"):
         oak.load_nn_archive(dai, "yolov8 pose", None, "RVC2", tmp_path / "cache")
+
+
+# --- pure conversions (edge/oak_convert.py) ------------------------------------------------------
+
+
+@pytest.mark.parametrize("coefficients, want", [
+    ([0.0] * 14, ()),  # an ideal lens: no distortion
+    ([0.1, -0.2, 0.001, 0.002] + [0.0] * 10, (0.1, -0.2, 0.001, 0.002)),  # k1, k2, p1, p2
+    ([0.1, -0.2, 0.0, 0.0, 0.03] + [0.0] * 9, (0.1, -0.2, 0.0, 0.0, 0.03)),  # + k3
+    ([0.1, 0, 0, 0, 0, 0.2, 0, 0.01] + [0.0] * 6, (0.1, 0, 0, 0, 0, 0.2, 0, 0.01)),  # rational model
+    ([0.1, 0.2], (0.1, 0.2, 0.0, 0.0)),  # short lists are padded
+    ([], ()),
+])
+def test_site_distortion(coefficients, want):
+    from superbody.edge.oak_convert import site_distortion
+
+    assert site_distortion(coefficients) == pytest.approx(want)
+
+
+def test_site_distortion_refuses_what_a_site_cannot_hold():
+    from superbody.edge.oak_convert import site_distortion
+
+    with pytest.raises(ValueError, match="coefficient 9 .* is 0.01"):
+        site_distortion([0.1] + [0.0] * 8 + [0.01] + [0.0] * 4)  # s2, a thin-prism term
+    with pytest.raises(ValueError, match="finite"):
+        site_distortion([np.nan])
+
+
+@pytest.mark.parametrize("Kbad, match", [
+    ([[400, 0, 600], [0, 400, 140], [0, 0, 1]], "inside the 512x288 frame"),  # principal point outside
+    ([[-400, 0, 256], [0, 400, 140], [0, 0, 1]], "must be > 0"),
+    ([[400, 5, 256], [0, 400, 140], [0, 0, 1]], r"\[\[fx, 0, cx\]"),  # skew
+    ([[400, 0], [0, 400]], "3x3"),
+])
+def test_camera_with_intrinsics_checks_the_matrix(Kbad, match):
+    from superbody.edge.oak_convert import camera_with_intrinsics
+
+    with pytest.raises(ValueError, match=match):
+        camera_with_intrinsics(_site().camera("front"), Kbad, [], W, H)
+
+
+def test_camera_with_intrinsics_keeps_the_pose():
+    from superbody.edge.oak_convert import camera_with_intrinsics
+
+    cam = _site(width=640, height=480, fx=500.0, fy=500.0, cx=320.0, cy=240.0).camera("front")
+    new = camera_with_intrinsics(cam, K, DIST, W, H)
+    assert (new.width, new.height, new.fx, new.fy, new.cx, new.cy) == (W, H, K[0, 0], K[1, 1], K[0, 2], K[1, 2])
+    assert new.dist == pytest.approx(tuple(DIST[:5]))
+    assert (new.id, new.fps, new.position, new.rotation) == (cam.id, cam.fps, cam.position, cam.rotation)
+
+
+@pytest.mark.parametrize("site_kw, want", [
+    ({}, None),  # identical
+    ({"fx": K[0, 0] * 1.009}, None),  # within 1 %
+    ({"fx": K[0, 0] * 1.02}, "fx"),
+    ({"cx": K[0, 2] + 6.0}, "cx"),  # 6 px > 1 % of 512
+    ({"width": 640, "height": 360, "cx": 320.0, "cy": 180.0}, "size 640x360 (device 512x288)"),
+])
+def test_intrinsics_disagreement(site_kw, want):
+    from superbody.edge.oak_convert import intrinsics_disagreement
+
+    kw = {"fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2], "cy": K[1, 2], **site_kw}
+    got = intrinsics_disagreement(_site(**kw).camera("front"), K, W, H)
+    assert got is None if want is None else want in got
+
+
+@pytest.mark.parametrize("td, ns", [
+    (datetime.timedelta(0), 0),
+    (datetime.timedelta(seconds=1, microseconds=7), 1_000_007_000),
+    (datetime.timedelta(days=3, seconds=5), (3 * 86400 + 5) * 10**9),  # a host up for days
+])
+def test_timedelta_ns(td, ns):
+    from superbody.edge.oak_convert import timedelta_ns
+
+    assert timedelta_ns(td) == ns
+
+
+def test_monotonic_to_unix_ns():
+    from superbody.edge.oak_convert import monotonic_to_unix_ns
+
+    # Captured 40 ms before "now" on the monotonic clock -> 40 ms before "now" on the UNIX clock.
+    assert monotonic_to_unix_ns(5_000_000_000, 5_040_000_000, 1_700_000_000_000_000_000) == 1_699_999_999_960_000_000
+
+
+def test_people_from_arrays_edge_cases():
+    from superbody.edge.oak_convert import people_from_arrays
+
+    assert people_from_arrays(np.zeros((0, 4)), np.zeros((0, 17, 3)), None, W, H, 0.5) == ()
+    kp = np.full((1, 17, 3), 0.5)
+    kp[0, :, 2] = 0.2  # every joint below the threshold: nobody
+    assert people_from_arrays(np.array([[0.1, 0.1, 0.5, 0.9]]), kp, None, W, H, 0.5) == ()
+    kp[0, 5, 2] = 0.9
+    (p,) = people_from_arrays(np.array([[-0.1, 0.1, 1.2, 0.9]]), kp, np.zeros((1, 17, 3)), W, H, 0.5)
+    np.testing.assert_allclose(p.bbox, [0, 0.1 * H, W, 0.9 * H], rtol=1e-6)  # clipped to the frame
+    assert p.num_visible == 1 and np.isnan(p.points3d).all()  # z = 0 everywhere: no depth
+    with pytest.raises(ValueError, match="2 boxes but 1 keypoint sets"):
+        people_from_arrays(np.zeros((2, 4)), kp, None, W, H, 0.5)
+
+
+# --- superbody calibrate oak-intrinsics -----------------------------------------------------------
+
+
+def _site_file(path):
+    path.write_text(
+        "# A two-camera test site.\n# Second header line.\n\n"
+        "[site]\nname = \"oak-test\"\n\n[floor]\npolygon = [[-3.0, -3.0], [3.0, -3.0], [3.0, 3.0], [-3.0, 3.0]]\n\n"
+        "[[cameras]]\nid = \"front\"\nwidth = 640\nheight = 480\nfps = 10.0\nfx = 500.0\nfy = 500.0\ncx = 320.0\ncy = 240.0\n"
+        "position = [0.0, -3.0, 2.0]\nlook_at = [0.0, 0.0, 1.0]\n\n"
+        "[[cameras]]\nid = \"side\"\nwidth = 1280\nheight = 720\nfps = 15.0\nfx = 900.0\nfy = 900.0\ncx = 640.0\ncy = 360.0\n"
+        "position = [3.0, 0.0, 2.0]\nlook_at = [0.0, 0.0, 1.0]\n",
+        encoding="utf-8",
+    )
+    return path
+
+
+def test_calibrate_oak_intrinsics_without_a_device_is_one_line_exit_2(tmp_path, capsys):
+    from superbody.edge.cli import main
+
+    site = _site_file(tmp_path / "site.toml")
+    assert main(["calibrate", "oak-intrinsics", "--site", str(site), "--camera", "front", "--out", str(tmp_path / "o.toml")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("superbody calibrate oak-intrinsics: error: oak: no OAK device found")
+    assert not (tmp_path / "o.toml").exists()
+    for bad, match in ((["--camera", "back"], "camera 'back' is not in site"), (["--camera", "front", "--size", "512"], "--size must be WIDTHxHEIGHT")):
+        assert main(["calibrate", "oak-intrinsics", "--site", str(site), *bad]) == 2
+        assert match in capsys.readouterr().err
+
+
+def test_calibrate_oak_intrinsics_writes_the_device_intrinsics(tmp_path, capsys, monkeypatch):
+    from superbody.edge.cli import main
+    from superbody.edge.site import load_site
+
+    calls = []
+
+    def device_calibration(device_id, width, height, timeout_s=10.0):  # stands in for the OAK
+        calls.append((device_id, width, height))
+        return K.copy(), np.array(DIST), "14442C10D13EABCE00"
+
+    monkeypatch.setattr(oak, "read_device_intrinsics", device_calibration)
+    site, out = _site_file(tmp_path / "site.toml"), tmp_path / "out.toml"
+    assert main(["calibrate", "oak-intrinsics", "--site", str(site), "--camera", "front", "--device", "14442C10D13EABCE00",
+                 "--size", "512x288", "--out", str(out)]) == 0
+    assert calls == [("14442C10D13EABCE00", 512, 288)]
+    assert "402.500" in capsys.readouterr().out
+    before, after = load_site(site), load_site(out)
+    front = after.camera("front")
+    assert (front.width, front.height, front.fx, front.fy, front.cx, front.cy) == (512, 288, 402.5, 401.0, 257.0, 141.5)
+    assert front.dist == pytest.approx(tuple(DIST[:5]))
+    np.testing.assert_allclose(front.R, before.camera("front").R, atol=1e-9)  # the pose is untouched
+    side, side0 = after.camera("side"), before.camera("side")
+    assert (side.width, side.height, side.fx, side.fy, side.cx, side.cy, side.dist) == (1280, 720, 900.0, 900.0, 640.0, 360.0, ())
+    np.testing.assert_allclose(side.R, side0.R, atol=1e-9)  # the other camera is untouched (up to 1e-9 rounding)
+    np.testing.assert_allclose(side.t, side0.t, atol=1e-9)
+    text = out.read_text()
+    assert text.startswith("# A two-camera test site.\n# Second header line.\n# Camera front intrinsics from OAK 14442C10D13EABCE00")
+
