@@ -537,3 +537,59 @@ def test_calibrate_oak_intrinsics_writes_the_device_intrinsics(tmp_path, capsys,
     text = out.read_text()
     assert text.startswith("# A two-camera test site.\n# Second header line.\n# Camera front intrinsics from OAK 14442C10D13EABCE00")
 
+
+
+# --- the device nodes: only their API surface can be checked without a device --------------------
+
+
+class _Spy:
+    """Stands in for a device node or output: every attribute used must exist on the real class."""
+
+    PROPERTY_TYPES = {"initialConfig": dai.SpatialLocationCalculatorConfig}
+
+    def __init__(self, cls, name, calls):
+        self._cls, self._name, self._calls = cls, name, calls
+
+    def __getattr__(self, attr):
+        assert hasattr(self._cls, attr), f"depthai {self._cls.__name__} has no attribute {attr!r}"
+        if isinstance(getattr(self._cls, attr), property):  # an input/output or a config
+            return _Spy(self.PROPERTY_TYPES.get(attr, dai.Node.Output), f"{self._name}.{attr}", self._calls)
+
+        def method(*args, **kwargs):
+            self._calls.append((f"{self._name}.{attr}", args, kwargs))
+            if attr == "build":
+                return self
+            if attr == "requestOutput":
+                return _Spy(dai.Node.Output, f"{self._name}.requestOutput()", self._calls)
+            return None
+
+        return method
+
+    def __repr__(self):
+        return self._name
+
+
+class _SpyPipeline:
+    def __init__(self):
+        self.calls = []
+
+    def create(self, cls):
+        return _Spy(cls, cls.__name__, self.calls)
+
+
+@pytest.mark.parametrize("depth", [False, True])
+def test_device_graph_uses_only_real_depthai_api(archive, depth):
+    pipeline = _SpyPipeline()
+    graph = oak.build_device_graph(dai, pipeline, archive, _site().camera("front"), depth, oak.OakOptions())
+    calls = {name: (args, kwargs) for name, args, kwargs in pipeline.calls}
+    size, frame_type, resize, fps = calls["Camera.requestOutput"][0]
+    assert (size, resize, fps) == ((W, H), dai.ImgResizeMode.CROP, 10.0)  # the NN frame, centre crop, site fps
+    assert frame_type == dai.ImgFrame.Type.RGB888p  # the archive's input type
+    assert calls["DetectionNetwork.build"][0][1] is archive
+    assert repr(graph.passthrough) == "DetectionNetwork.passthrough" and graph.spatial == depth
+    if depth:
+        assert repr(calls["Depth.setAlignTo"][0][0]) == "DetectionNetwork.passthrough"  # depth in the NN frame
+        assert repr(graph.detections) == "SpatialLocationCalculator.outputDetections"
+        assert calls["SpatialLocationCalculator.initialConfig.setCalculateSpatialKeypoints"][0] == (True,)
+    else:
+        assert repr(graph.detections) == "DetectionNetwork.out" and "Depth.build" not in calls
