@@ -121,7 +121,7 @@ def test_killed_node_drops_its_liveliness_token(processes, listener):
 BAD_ARGS = [
     (["--camera", "zz"], "nw, ne, se, sw"),  # unknown camera lists the valid ones
     (["--camera", "nw", "--people", "500"], "--people must be in [0, 64]"),
-    (["--camera", "nw", "--source", "kinect"], "invalid choice"),
+    (["--camera", "nw", "--source", "kinect"], "--source must be one of sim, oak[:DEVICE_ID], video:PATH, webcam:INDEX, rtsp://..., got 'kinect'"),
     (["--camera", "nw", "--clock-scale", "-1"], "positive"),
 ]
 
@@ -144,18 +144,27 @@ def test_a_frame_that_cannot_be_encoded_is_skipped_not_fatal(listener):
     import numpy as np
 
     from superbody.edge.node import run_node
-    from superbody.edge.observation import Observation, PersonView
+    from superbody.edge.observation import PersonView
+    from superbody.edge.sim_source import SimSource
+    from superbody.edge.source import Frame
 
     site = load_site(SITE)
-    good = SimCamera(World(site, 1, seed=0), "nw")
     bad_view = PersonView(np.full((17, 3), np.nan, np.float32), np.array([5, 5, 1, 1], np.float32), np.zeros((16, 8), np.float32))
 
     class EveryOtherBad:
-        def observe(self, stamp_ns):
-            obs = good.observe(stamp_ns)[0]
-            if (stamp_ns // (10**9 // 15)) % 2:
-                return Observation(obs.site, obs.camera, obs.seq, obs.stamp_ns, obs.width, obs.height, (bad_view,))
-            return obs
+        """The simulated camera's frames, every other one with a view no subscriber accepts."""
+
+        def __init__(self):
+            self.sim = SimSource(site, "nw", seed=0, people=1)
+
+        def frames(self):
+            for f in self.sim.frames():
+                if (f.stamp_ns // (10**9 // 15)) % 2:
+                    f = Frame(f.stamp_ns, f.width, f.height, None, (bad_view,))
+                yield f
+
+        def close(self):
+            self.sim.close()
 
     conf = transport.session_config("peer", connect=[f"tcp/127.0.0.1:{listener.port}"])
     published = run_node(conf, site, "nw", EveryOtherBad(), duration_s=2.0)
