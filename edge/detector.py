@@ -105,13 +105,11 @@ def parse_detector(text: str) -> DetectorSpec:
     raise ValueError(f"--detector must be one of {forms}, got {text!r}")
 
 
-def open_detector(spec: DetectorSpec, *, static_images: bool = False, threads: int = 1) -> Detector:
+def open_detector(spec: DetectorSpec, *, threads: int = 1) -> Detector:
     """Start the detector a spec names (heavy imports happen here, not at import time).
 
     Args:
         spec: from ``parse_detector``.
-        static_images: treat every image as unrelated to the previous one (BlazePose then runs
-            its person detector on each image instead of tracking across frames).
         threads: onnxruntime intra-op threads for the ONNX detectors.
 
     Raises:
@@ -121,7 +119,7 @@ def open_detector(spec: DetectorSpec, *, static_images: bool = False, threads: i
     if spec.kind == "blazepose":
         from superbody.edge.blazepose import BlazePose
 
-        return BlazePose(static_images=static_images)
+        return BlazePose()
     assert spec.path is not None
     if spec.kind == "yolo-pose":
         from superbody.edge.yolo_pose import YoloPose

@@ -9,25 +9,7 @@ import pytest
 from superbody.edge.blazepose import FROM_BLAZEPOSE, BlazePose, blazepose_python, coco_from_blazepose
 from superbody.edge.body import INDEX, KEYPOINTS
 from superbody.edge.detector import DetectorError
-
-# Joints of NASA's portrait of Eileen Collins (skimage.data.astronaut(), 512 x 512), marked by
-# eye on the photo before running any detector: eye pupils, nose tip, and the shoulder joints
-# under the suit (the suit's puffy outline is ~20 px outside them, so they are uncertain by
-# ~15 px). Left and right are hers.
-ASTRONAUT = {
-    "nose": (224, 126),
-    "left_eye": (246, 103),
-    "right_eye": (203, 101),
-    "left_shoulder": (310, 258),
-    "right_shoulder": (100, 250),
-}
-TOLERANCE_PX = 30.0  # the issue's acceptance bound for nose and shoulders
-
-
-def astronaut_bgr() -> np.ndarray:
-    from skimage import data
-
-    return np.ascontiguousarray(data.astronaut()[:, :, ::-1])
+from tests.edge.photos import ASTRONAUT, TOLERANCE_PX, astronaut_bgr
 
 
 def test_mapping_names_the_same_joints():
@@ -63,7 +45,7 @@ def test_coco_from_blazepose_nobody_visible():
 
 def test_blazepose_finds_the_astronaut():
     """The real model on a real photo: nose, eyes and shoulders within 30 px of the marked joints."""
-    bp = BlazePose(static_images=True)
+    bp = BlazePose()
     try:
         kps, boxes = bp.detect(astronaut_bgr())
         assert kps.shape == (1, 17, 3) and boxes.shape == (1, 4)
