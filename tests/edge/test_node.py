@@ -329,9 +329,10 @@ def test_video_node_publishes_the_person_where_the_photo_shows_them(processes, t
     try:
         p = processes.start("edge", "run", "--site", str(WTF_SITE), "--camera", "1", "--source", f"video:{clip}",
                             "--detector", "blazepose", "--connect", f"tcp/127.0.0.1:{port}")
-        assert lst.wait_for(lambda: len(lst.received["1"]) >= 10, timeout=30), p.stderr.read() if p.poll() is not None else ""
-        _, err = p.communicate(timeout=30)  # the node ends with the file
+        _, err = p.communicate(timeout=60)  # the node ends with the file
         assert p.returncode == 0, err
+        # 60 frames in 4 s; a loaded machine skips some (frames are dropped, not delayed).
+        assert lst.wait_for(lambda: len(lst.received["1"]) >= 5, timeout=5), (len(lst.received["1"]), err)
     finally:
         lst.close()
     assert not lst.errors
