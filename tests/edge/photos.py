@@ -41,13 +41,14 @@ def astronaut_frame(width: int = 640, height: int = 480) -> tuple[np.ndarray, di
     return frame, marks
 
 
-def astronaut_video(path: Path, frames: int, fps: float, width: int = 640, height: int = 480) -> dict[str, tuple[float, float]]:
-    """Write a lossless (FFV1) AVI of ``astronaut_frame`` repeated; returns the marks in its pixels.
+def astronaut_video(path: Path, frames: int, fps: float, width: int = 640, height: int = 480,
+                    fourcc: str = "FFV1") -> dict[str, tuple[float, float]]:
+    """Write an AVI of ``astronaut_frame`` repeated; returns the marks in its pixels.
 
-    Lossless, because BlazePose's right shoulder on this photo (a puffy suit) moves by 15-20 px
+    Lossless (FFV1) by default, because BlazePose's right shoulder on this photo (a puffy suit) moves by 15-20 px
     under JPEG artefacts: the node's tests check the node, not the codec."""
     frame, marks = astronaut_frame(width, height)
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"FFV1"), fps, (width, height))
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*fourcc), fps, (width, height))
     assert writer.isOpened(), f"OpenCV cannot write {path}"
     for _ in range(frames):
         writer.write(frame)
