@@ -55,7 +55,9 @@ class VideoSource:
             raise SourceError(f"{self.name}: no such file")
         self._cap = cv2.VideoCapture(target) if kind == "webcam" else cv2.VideoCapture(str(target), cv2.CAP_FFMPEG)
         if not self._cap.isOpened():
-            raise SourceError(f"{self.name}: OpenCV cannot open it")
+            hint = {"video": "is it a video file?", "webcam": f"is /dev/video{target} there and free?",
+                    "rtsp": "check the URL, the credentials and that the camera is reachable"}[kind]
+            raise SourceError(f"{self.name}: OpenCV cannot open it ({hint})")
         if kind == "webcam":  # ask for the site's size; the check below says if the camera agreed
             self._cap.set(cv2.CAP_PROP_FRAME_WIDTH, width)
             self._cap.set(cv2.CAP_PROP_FRAME_HEIGHT, height)
