@@ -2,7 +2,9 @@
 
 Capture times (UNIX ns):
 
-- webcams and streams: the wall clock when the frame is grabbed;
+- webcams and streams: the wall clock when the frame is grabbed (webcams are asked to queue at
+  most one frame, so that a slow node does not stamp old frames as new; streams buffer as
+  FFmpeg does, so their times are late by the stream's latency);
 - video files: the time the source started plus the frame's position in the file (frame index
   / the file's fps). Played in real time by default: each frame is delivered at its capture
   time, and frames whose time has passed by more than a frame period are skipped, as a live
@@ -61,6 +63,8 @@ class VideoSource:
         if kind == "webcam":  # ask for the site's size; the check below says if the camera agreed
             self._cap.set(cv2.CAP_PROP_FRAME_WIDTH, width)
             self._cap.set(cv2.CAP_PROP_FRAME_HEIGHT, height)
+            # A frame waiting in the driver's queue would get a late capture time: keep one.
+            self._cap.set(cv2.CAP_PROP_BUFFERSIZE, 1)
         w, h = int(self._cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(self._cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
         if (w, h) != (0, 0):  # some streams report no size before the first frame
             self._check_size(w, h)
