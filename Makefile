@@ -5,7 +5,7 @@ PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: demo test bench models clean
+.PHONY: demo test bench models clean blazepose
 
 # Runtime install (no torch): what the demo and a deployed host need.
 $(VENV)/.run-installed: pyproject.toml
@@ -24,7 +24,27 @@ $(VENV)/.dev-installed: pyproject.toml
 demo: $(VENV)/.run-installed
 	$(VENV)/bin/superbody demo $(ARGS)
 
-test: $(VENV)/.dev-installed
+# BlazePose (the `--detector blazepose` camera nodes) runs in an interpreter of its own:
+# mediapipe 0.10.21, the last release whose wheel bundles the pose weights, needs numpy < 2 and
+# Python <= 3.12. Installed without the packages its solutions.pose does not import (jax,
+# sentencepiece, sounddevice) and with opencv-python-headless in place of opencv-contrib-python:
+# 0.4 GB instead of 1 GB. See deploy/blazepose-requirements.txt.
+BLAZEPOSE_PYTHON ?= $(PYTHON)
+BLAZEPOSE_VENV ?= .venv-blazepose
+
+$(BLAZEPOSE_VENV)/.installed: deploy/blazepose-requirements.txt
+	@test -x $(BLAZEPOSE_VENV)/bin/python || $(BLAZEPOSE_PYTHON) -m venv $(BLAZEPOSE_VENV)
+	$(BLAZEPOSE_VENV)/bin/python -m pip install -q --upgrade pip
+	$(BLAZEPOSE_VENV)/bin/python -m pip install -q --no-deps 'mediapipe==0.10.21'
+	@# pip warns that mediapipe's left-out requirements are missing: keep that out of sight.
+	$(BLAZEPOSE_VENV)/bin/python -m pip install -q -r deploy/blazepose-requirements.txt 2>$(BLAZEPOSE_VENV)/pip.log \
+		|| { cat $(BLAZEPOSE_VENV)/pip.log; exit 1; }
+	$(BLAZEPOSE_VENV)/bin/python -c "from mediapipe.python.solutions import pose"
+	@touch $@
+
+blazepose: $(BLAZEPOSE_VENV)/.installed
+
+test: $(VENV)/.dev-installed $(BLAZEPOSE_VENV)/.installed
 	$(PY) -m pytest -q $(ARGS)
 
 bench: $(VENV)/.dev-installed
@@ -36,4 +56,4 @@ models: $(VENV)/.dev-installed
 	scripts/train_models.sh
 
 clean:
-	rm -rf $(VENV) .pytest_cache .hypothesis
+	rm -rf $(VENV) $(BLAZEPOSE_VENV) .pytest_cache .hypothesis

@@ -1,139 +1,325 @@
-"""The camera-node process: a frame source, its detector, and a Zenoh publisher.
+"""The camera-node process: a frame source, a detector where the source has none, a Zenoh publisher.
 
-``superbody edge run --site SITE.toml --camera ID --source sim --seed 7`` publishes one
-Observation per frame on ``superbody/<site>/cameras/<camera>/observations`` at the camera's fps
-and holds a liveliness token on ``superbody/<site>/cameras/<camera>/alive`` while it runs.
+``superbody edge run --site SITE.toml --camera ID --source SOURCE [--detector DETECTOR]``
+publishes one Observation per frame on ``superbody/<site>/cameras/<camera>/observations`` and
+holds a liveliness token on ``superbody/<site>/cameras/<camera>/alive`` while it runs.
 
-Frames are captured on a grid of the world clock (frame k at k / fps plus a per-camera phase),
-so simulated nodes started with the same site and seed see the same people at the same instants.
+Sources (``--source``):
+
+- ``sim``: simulated people (edge/sim_source.py), paced on the world clock;
+- ``oak[:DEVICE_ID]``: a Luxonis OAK with the pose network on the device (edge/oak.py, the
+  ``oak`` extra);
+- ``video:PATH``, ``webcam:INDEX``, ``rtsp://...``: OpenCV captures (edge/video.py) whose images
+  go through a host detector, ``--detector blazepose | yolo-pose:PATH.onnx | rtmo:PATH.onnx``
+  (edge/detector.py).
+
+Every frame takes one path (edge/source.py): detections from the source or from the detector,
+each person's colour signature from their box in the image when there is one, then encode,
+publish.
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
-import math
 import signal
 import sys
 import threading
 import time
-from typing import Protocol
+from dataclasses import dataclass, replace
+from typing import Literal
+from urllib.parse import urlsplit
+
+import numpy as np
+from numpy.typing import NDArray
 
 from superbody.edge import transport, wire
 from superbody.edge.cli import int_in, positive
 from superbody.edge.clock import WorldClock, add_clock_args, clock_from_args
-from superbody.edge.observation import Observation
+from superbody.edge.colour import hs_histogram
+from superbody.edge.detector import DETECTOR_FORMS, Detector, DetectorError, DetectorSpec, parse_detector
+from superbody.edge.observation import Observation, PersonView, empty_histogram
 from superbody.edge.site import Site, SiteError, load_site
+from superbody.edge.source import Frame, FrameSource, SourceError
 
-__all__ = ["Source", "SimSource", "make_source", "run_node", "register", "SOURCES"]
+__all__ = [
+    "SOURCE_FORMS",
+    "DEFAULT_OAK_MODEL",
+    "SourceSpec",
+    "parse_source",
+    "open_source",
+    "box_histogram",
+    "frame_observation",
+    "run_node",
+    "register",
+]
 
 log = logging.getLogger("superbody.edge")
 
-SOURCES = ("sim",)
+SOURCE_FORMS = ("sim", "oak[:DEVICE_ID]", "video:PATH", "webcam:INDEX", "rtsp://...")
+DEFAULT_OAK_MODEL = "luxonis/yolov8-nano-pose-estimation:coco-512x288"
+_MAX_WEBCAM = 63
 
 
-class Source(Protocol):
-    """A frame source with its detector: the Observation captured at a given time."""
+@dataclass(frozen=True)
+class SourceSpec:
+    """A parsed ``--source`` value.
 
-    def observe(self, stamp_ns: int) -> Observation: ...
+    Attributes:
+        kind: which source.
+        target: OAK device id (or None: the first device), video path, webcam index or RTSP URL.
+    """
+
+    kind: Literal["sim", "oak", "video", "webcam", "rtsp"]
+    target: str | int | None = None
+
+    @property
+    def needs_detector(self) -> bool:
+        """Sources that deliver images without detections."""
+        return self.kind in ("video", "webcam", "rtsp")
+
+    def __str__(self) -> str:
+        if self.kind == "rtsp":
+            return str(self.target)
+        return self.kind if self.target is None else f"{self.kind}:{self.target}"
 
 
-class SimSource:
-    """Simulated people seen by one camera of a site (edge/simulator.py)."""
+def parse_source(text: str) -> SourceSpec:
+    """Parse a ``--source`` value; ``ValueError`` naming the value and the valid forms otherwise."""
+    forms = ", ".join(SOURCE_FORMS)
+    kind, sep, rest = text.partition(":")
+    if text == "sim":
+        return SourceSpec("sim")
+    if kind == "oak":
+        if sep and not rest:
+            raise ValueError(f"--source {text!r}: the OAK device id after 'oak:' is empty (or write plain 'oak' for the first device)")
+        return SourceSpec("oak", rest or None)
+    if kind == "video" and sep:
+        if not rest:
+            raise ValueError(f"--source {text!r}: the video file path after 'video:' is empty")
+        return SourceSpec("video", rest)
+    if kind == "webcam" and sep:
+        if not (rest.isdigit() and int(rest) <= _MAX_WEBCAM):
+            raise ValueError(f"--source {text!r}: the webcam index must be an integer in [0, {_MAX_WEBCAM}], got {rest!r}")
+        return SourceSpec("webcam", int(rest))
+    if kind in ("rtsp", "rtsps") and rest.startswith("//"):
+        if not urlsplit(text).netloc:
+            raise ValueError(f"--source {text!r}: the RTSP URL has no host")
+        return SourceSpec("rtsp", text)
+    raise ValueError(f"--source must be one of {forms}, got {text!r}")
 
-    def __init__(self, site: Site, camera_id: str, seed: int, people: int = 3, depth: bool = False):
-        from superbody.edge.simulator import SimCamera, World
 
-        self._cam = SimCamera(World(site, people, seed), camera_id, depth=depth)
+def open_source(
+    spec: SourceSpec,
+    site: Site,
+    camera_id: str,
+    *,
+    seed: int = 0,
+    people: int = 3,
+    depth: bool = False,
+    clock: WorldClock = WorldClock(),
+    nn_archive: str | None = None,
+    oak_model: str = DEFAULT_OAK_MODEL,
+    realtime: bool = True,
+    loop: bool = False,
+) -> FrameSource:
+    """Open the source a spec names for one camera of a site.
 
-    def observe(self, stamp_ns: int) -> Observation:
-        return self._cam.observe(stamp_ns)[0]
+    Raises:
+        SourceError: the source cannot open, or delivers another image size than the site's
+            camera; the message names the source.
+    """
+    cam = site.camera(camera_id)
+    if spec.kind == "sim":
+        from superbody.edge.sim_source import SimSource
+
+        return SimSource(site, camera_id, seed, people, depth, clock)
+    if spec.kind == "oak":
+        try:
+            from superbody.edge.oak import open_oak_source
+
+            return open_oak_source(site, camera_id, spec.target, nn_archive, oak_model, depth)  # type: ignore[arg-type]
+        except ImportError as e:
+            raise SourceError(f"--source {spec}: OAK support is not installed (pip install 'superbody[oak]'): {e}") from None
+    from superbody.edge.video import VideoSource
+
+    return VideoSource(spec.kind, spec.target, cam.width, cam.height, realtime=realtime, loop=loop)  # type: ignore[arg-type]
 
 
-def make_source(name: str, site: Site, camera_id: str, **options) -> Source:
-    """A source by name; ``ValueError`` listing the valid names otherwise."""
-    if name == "sim":
-        return SimSource(site, camera_id, options.get("seed", 0), options.get("people", 3), options.get("depth", False))
-    raise ValueError(f"unknown source {name!r}; valid sources: {', '.join(SOURCES)}")
+def box_histogram(image: NDArray[np.uint8], box: NDArray) -> NDArray[np.float32]:
+    """The colour signature of a person: the hue-saturation histogram of their box in the image.
+
+    Args:
+        image: (H, W, 3) uint8 BGR.
+        box: (4,) x0, y0, x1, y1 pixels (clipped to the image here).
+
+    Returns:
+        ``HIST_BINS`` float32 histogram summing to 1 (zeros for an empty or invalid box).
+    """
+    h, w = image.shape[:2]
+    if not np.isfinite(box).all():
+        return empty_histogram()
+    x0, x1 = (int(np.clip(round(float(v)), 0, w)) for v in (box[0], box[2]))
+    y0, y1 = (int(np.clip(round(float(v)), 0, h)) for v in (box[1], box[3]))
+    return hs_histogram(image[y0:y1, x0:x1])
+
+
+def frame_observation(site: str, camera: str, seq: int, frame: Frame, detector: Detector | None = None) -> Observation:
+    """One frame as one Observation: the node's single path for every source.
+
+    People come from the frame (sources that detect) or from ``detector`` run on its image;
+    when the frame has an image, each person's histogram is computed from their box in it.
+    """
+    people = frame.people
+    if people is None:
+        if frame.image is None or detector is None:
+            raise ValueError("a frame without detections needs an image and a detector")
+        keypoints, boxes = detector.detect(frame.image)
+        people = tuple(PersonView(k, b, empty_histogram()) for k, b in zip(keypoints, boxes))
+    if frame.image is not None:
+        people = tuple(replace(p, histogram=box_histogram(frame.image, p.bbox)) for p in people)
+    return Observation(site, camera, seq, frame.stamp_ns, frame.width, frame.height, people)
 
 
 def run_node(
     conf,
     site: Site,
     camera_id: str,
-    source: Source,
+    source: FrameSource,
     clock: WorldClock = WorldClock(),
     duration_s: float | None = None,
     stop: threading.Event | None = None,
     status_every_s: float = 10.0,
+    *,
+    detector: Detector | None = None,
 ) -> int:
-    """Publish the source's Observations until ``stop`` is set or ``duration_s`` (world time) passes.
+    """Publish an Observation per frame of ``source`` until it ends, ``stop`` is set or
+    ``duration_s`` (world time) passes. Closes the source.
 
     Returns:
         The number of Observations published.
+
+    Raises:
+        SourceError, DetectorError: the source or the detector failed while running.
     """
     import zenoh
 
     cam = site.camera(camera_id)
     stop = stop or threading.Event()
-    period_ns = 1e9 / cam.fps
-    # Cameras are not synchronised: spread their capture instants over the frame period.
-    phase_ns = period_ns * site.camera_index(camera_id) / max(len(site.cameras), 1)
-    published = skipped = people = rejected = 0
+    published = people = rejected = seq = 0
     with zenoh.open(conf) as session:
         token = session.liveliness().declare_token(transport.camera_alive_key(site.name, camera_id))
         pub = session.declare_publisher(transport.observation_key(site.name, camera_id), encoding=wire.zenoh_encoding())
         start = clock.now_ns()
         end = None if duration_s is None else start + int(duration_s * 1e9)
-        k = math.ceil((start - phase_ns) / period_ns)
-        last_status = time.monotonic()
-        log.info("camera %s of site %s publishing at %.1f fps on %s", camera_id, site.name, cam.fps, transport.observation_key(site.name, camera_id))
-        while not stop.is_set():
-            t_ns = int(k * period_ns + phase_ns)
-            if end is not None and t_ns > end:
-                break
-            clock.sleep_until(t_ns)
-            obs = source.observe(t_ns)
-            try:
-                payload = wire.encode(obs)
-            except ValueError as e:  # a source produced something no subscriber would accept
-                rejected += 1
-                if rejected <= 3 or rejected % 1000 == 0:
-                    log.error("camera %s: frame %d not published (%d so far): %s", camera_id, obs.seq, rejected, e)
-                k += 1
-                continue
-            pub.put(payload)
-            published += 1
-            people += len(obs.people)
-            # If we fell behind (slow machine), skip to the next frame in the future.
-            k_now = math.floor((clock.now_ns() - phase_ns) / period_ns)
-            if k_now > k + 1:
-                skipped += k_now - k - 1
-                k = k_now
-            k += 1
-            if time.monotonic() - last_status > status_every_s:
-                last_status = time.monotonic()
-                log.info("camera %s: %d frames published, %d skipped, %.2f people/frame", camera_id, published, skipped, people / max(published, 1))
-        pub.undeclare()
-        token.undeclare()
-    log.info("camera %s stopped after %d frames (%d skipped)", camera_id, published, skipped)
+        last_status = t0 = time.monotonic()
+        log.info("camera %s of site %s publishing on %s", camera_id, site.name, transport.observation_key(site.name, camera_id))
+        try:
+            for frame in source.frames():
+                if stop.is_set() or (end is not None and frame.stamp_ns > end):
+                    break
+                if (frame.width, frame.height) != (cam.width, cam.height):
+                    raise SourceError(f"camera {camera_id}: the source delivered a {frame.width}x{frame.height} frame, "
+                                      f"the site's camera is {cam.width}x{cam.height}")
+                obs = frame_observation(site.name, camera_id, seq, frame, detector)
+                seq += 1
+                try:
+                    payload = wire.encode(obs)
+                except ValueError as e:  # a source produced something no subscriber would accept
+                    rejected += 1
+                    if rejected <= 3 or rejected % 1000 == 0:
+                        log.error("camera %s: frame %d not published (%d so far): %s", camera_id, obs.seq, rejected, e)
+                    continue
+                pub.put(payload)
+                published += 1
+                people += len(obs.people)
+                if time.monotonic() - last_status > status_every_s:
+                    last_status = time.monotonic()
+                    log.info("camera %s: %d frames published (%.1f/s), %d skipped, %.2f people/frame", camera_id, published,
+                             published / (last_status - t0), getattr(source, "skipped", 0), people / max(published, 1))
+        finally:
+            source.close()
+            pub.undeclare()
+            token.undeclare()
+    log.info("camera %s stopped after %d frames (%d skipped)", camera_id, published, getattr(source, "skipped", 0))
     return published
 
 
+def _source_arg(text: str) -> SourceSpec:
+    try:
+        return parse_source(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def _detector_arg(text: str) -> DetectorSpec:
+    try:
+        return parse_detector(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def _check_options(args: argparse.Namespace) -> None:
+    """Options that only some sources take; ``ValueError`` naming the option otherwise."""
+    spec: SourceSpec = args.source
+    if spec.needs_detector and args.detector is None:
+        raise ValueError(f"--source {spec} needs --detector, one of {', '.join(DETECTOR_FORMS)}")
+    if not spec.needs_detector and args.detector is not None:
+        raise ValueError(f"--detector is for video, webcam and RTSP sources; --source {spec} detects people itself")
+    only = {
+        "sim": [("--seed", args.seed), ("--people", args.people)],
+        "oak": [("--nn-archive", args.nn_archive), ("--oak-model", args.oak_model)],
+        "video": [("--fast", args.fast or None), ("--loop", args.loop or None)],
+    }
+    for kind, options in only.items():
+        for name, value in options:
+            if value is not None and spec.kind != kind:
+                raise ValueError(f"{name} is for --source {kind}, not --source {spec}")
+    if args.depth and spec.kind not in ("sim", "oak"):
+        raise ValueError(f"--depth is for --source sim and oak, not --source {spec}")
+    if spec.kind != "sim" and (args.clock_scale != 1.0 or args.clock_anchor_ns != 0):
+        raise ValueError(f"--clock-scale and --clock-anchor-ns are for simulated sources; --source {spec} runs on the wall clock")
+
+
 def _run(args: argparse.Namespace) -> int:
+    def error(message: object, code: int = 2) -> int:
+        print(f"superbody edge run: error: {message}", file=sys.stderr)
+        return code
+
     try:
         site = load_site(args.site)
         site.camera(args.camera)
-        source = make_source(args.source, site, args.camera, seed=args.seed, people=args.people, depth=args.depth)
+        _check_options(args)
         clock = clock_from_args(args)
         conf = transport.config_from_args(args)
     except (SiteError, KeyError, ValueError) as e:
-        print(f"superbody edge run: error: {e.args[0] if e.args else e}", file=sys.stderr)
-        return 2
+        return error(e.args[0] if e.args else e)
+    spec: SourceSpec = args.source
+    try:
+        source = open_source(spec, site, args.camera, seed=args.seed or 0, people=3 if args.people is None else args.people,
+                             depth=args.depth, clock=clock, nn_archive=args.nn_archive,
+                             oak_model=args.oak_model or DEFAULT_OAK_MODEL, realtime=not args.fast, loop=args.loop)
+    except SourceError as e:
+        return error(e)
+    detector = None
+    if args.detector is not None:
+        from superbody.edge.detector import open_detector
+
+        try:
+            detector = open_detector(args.detector)
+        except DetectorError as e:
+            source.close()
+            return error(f"--detector {args.detector}: {e}")
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
-    run_node(conf, site, args.camera, source, clock, args.duration, stop)
+    try:
+        run_node(conf, site, args.camera, source, clock, args.duration, stop, detector=detector)
+    except (SourceError, DetectorError) as e:
+        return error(e, 1)
+    finally:
+        if detector is not None:
+            detector.close()
     return 0
 
 
@@ -143,10 +329,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = edge_sub.add_parser("run", help="run a camera node: capture, detect, publish Observations")
     p.add_argument("--site", required=True, help="site file (TOML)")
     p.add_argument("--camera", required=True, help="camera id in the site file")
-    p.add_argument("--source", default="sim", choices=SOURCES, help="frame source (default: sim)")
-    p.add_argument("--seed", type=int, default=0, help="simulator seed: nodes with the same seed see the same people")
-    p.add_argument("--people", type=int_in(0, 64, "--people"), default=3, help="simulated people (default 3)")
-    p.add_argument("--depth", action="store_true", help="simulate a depth camera (3D joints in the Observations)")
+    p.add_argument("--source", type=_source_arg, default=SourceSpec("sim"), metavar="SOURCE",
+                   help=f"frame source: {', '.join(SOURCE_FORMS)} (default: sim)")
+    p.add_argument("--detector", type=_detector_arg, default=None, metavar="DETECTOR",
+                   help=f"host pose detector for video, webcam and RTSP sources: {', '.join(DETECTOR_FORMS)}")
+    p.add_argument("--seed", type=int, default=None, help="sim: seed; nodes with the same seed see the same people (default 0)")
+    p.add_argument("--people", type=int_in(0, 64, "--people"), default=None, help="sim: simulated people (default 3)")
+    p.add_argument("--depth", action="store_true", help="sim: simulate a depth camera; oak: stereo depth per keypoint")
+    p.add_argument("--nn-archive", default=None, metavar="PATH", help="oak: a local NN archive instead of the model zoo's")
+    p.add_argument("--oak-model", default=None, metavar="NAME", help=f"oak: model zoo name (default {DEFAULT_OAK_MODEL})")
+    p.add_argument("--fast", action="store_true", help="video: read frames as fast as the detector goes, not in real time")
+    p.add_argument("--loop", action="store_true", help="video: start the file again at its end")
     p.add_argument("--duration", type=positive, default=None, help="stop after this many seconds of world time")
     add_clock_args(p)
     transport.add_session_args(p)

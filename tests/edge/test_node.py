@@ -6,14 +6,19 @@ import threading
 import time
 from collections import defaultdict
 
+import cv2
 import numpy as np
 import pytest
 import zenoh
 
 from superbody.edge import transport, wire
+from superbody.edge.body import INDEX
+from superbody.edge.node import SourceSpec, box_histogram, frame_observation, parse_source
 from superbody.edge.simulator import SimCamera, World
 from superbody.edge.site import load_site
-from tests.conftest import LAB_SITE, free_port
+from superbody.edge.source import Frame
+from tests.conftest import LAB_SITE, WTF_SITE, free_port
+from tests.edge.photos import TOLERANCE_PX, astronaut_video
 
 SITE = str(LAB_SITE)
 
@@ -121,7 +126,7 @@ def test_killed_node_drops_its_liveliness_token(processes, listener):
 BAD_ARGS = [
     (["--camera", "zz"], "nw, ne, se, sw"),  # unknown camera lists the valid ones
     (["--camera", "nw", "--people", "500"], "--people must be in [0, 64]"),
-    (["--camera", "nw", "--source", "kinect"], "invalid choice"),
+    (["--camera", "nw", "--source", "kinect"], "--source must be one of sim, oak[:DEVICE_ID], video:PATH, webcam:INDEX, rtsp://..., got 'kinect'"),
     (["--camera", "nw", "--clock-scale", "-1"], "positive"),
 ]
 
@@ -144,21 +149,203 @@ def test_a_frame_that_cannot_be_encoded_is_skipped_not_fatal(listener):
     import numpy as np
 
     from superbody.edge.node import run_node
-    from superbody.edge.observation import Observation, PersonView
+    from superbody.edge.observation import PersonView
+    from superbody.edge.sim_source import SimSource
+    from superbody.edge.source import Frame
 
     site = load_site(SITE)
-    good = SimCamera(World(site, 1, seed=0), "nw")
     bad_view = PersonView(np.full((17, 3), np.nan, np.float32), np.array([5, 5, 1, 1], np.float32), np.zeros((16, 8), np.float32))
 
     class EveryOtherBad:
-        def observe(self, stamp_ns):
-            obs = good.observe(stamp_ns)[0]
-            if (stamp_ns // (10**9 // 15)) % 2:
-                return Observation(obs.site, obs.camera, obs.seq, obs.stamp_ns, obs.width, obs.height, (bad_view,))
-            return obs
+        """The simulated camera's frames, every other one with a view no subscriber accepts."""
+
+        def __init__(self):
+            self.sim = SimSource(site, "nw", seed=0, people=1)
+
+        def frames(self):
+            for f in self.sim.frames():
+                if (f.stamp_ns // (10**9 // 15)) % 2:
+                    f = Frame(f.stamp_ns, f.width, f.height, None, (bad_view,))
+                yield f
+
+        def close(self):
+            self.sim.close()
 
     conf = transport.session_config("peer", connect=[f"tcp/127.0.0.1:{listener.port}"])
     published = run_node(conf, site, "nw", EveryOtherBad(), duration_s=2.0)
     assert 10 <= published <= 22  # about half of 2 s x 15 fps
     assert listener.wait_for(lambda: len(listener.received["nw"]) >= 10, timeout=10)
     assert not listener.errors
+
+
+# -- sources -------------------------------------------------------------------------------------
+
+# (--source value, expected spec)
+GOOD_SOURCES = [
+    ("sim", SourceSpec("sim")),
+    ("oak", SourceSpec("oak")),  # the first OAK found
+    ("oak:18443010C1E4F41200", SourceSpec("oak", "18443010C1E4F41200")),  # by device id
+    ("oak:1.3", SourceSpec("oak", "1.3")),  # by USB path
+    ("video:clips/walk.mp4", SourceSpec("video", "clips/walk.mp4")),
+    ("video:/abs/with:colon.avi", SourceSpec("video", "/abs/with:colon.avi")),
+    ("webcam:0", SourceSpec("webcam", 0)),
+    ("webcam:12", SourceSpec("webcam", 12)),
+    ("rtsp://10.0.0.5:554/stream1", SourceSpec("rtsp", "rtsp://10.0.0.5:554/stream1")),
+    ("rtsps://user:pw@cam.local/live", SourceSpec("rtsp", "rtsps://user:pw@cam.local/live")),
+]
+
+
+@pytest.mark.parametrize("text,spec", GOOD_SOURCES)
+def test_parse_source(text, spec):
+    assert parse_source(text) == spec
+    assert str(spec) == text
+
+
+# (--source value, fragment of the error)
+BAD_SOURCES = [
+    ("kinect", "--source must be one of sim, oak[:DEVICE_ID], video:PATH, webcam:INDEX, rtsp://..., got 'kinect'"),
+    ("", "got ''"),
+    ("SIM", "got 'SIM'"),
+    ("oak:", "the OAK device id after 'oak:' is empty"),
+    ("video:", "the video file path after 'video:' is empty"),
+    ("video", "got 'video'"),
+    ("webcam:", "webcam index must be an integer in [0, 63], got ''"),
+    ("webcam:-1", "got '-1'"),
+    ("webcam:64", "got '64'"),
+    ("webcam:cam0", "got 'cam0'"),
+    ("rtsp://", "the RTSP URL has no host"),
+    ("rtsp:/x", "got 'rtsp:/x'"),
+    ("http://cam/stream", "got 'http://cam/stream'"),
+]
+
+
+@pytest.mark.parametrize("text,fragment", BAD_SOURCES)
+def test_parse_source_rejects(text, fragment):
+    with pytest.raises(ValueError) as e:
+        parse_source(text)
+    assert fragment in str(e.value)
+
+
+def test_box_histogram_is_the_colour_of_the_box():
+    image = np.full((100, 200, 3), (0, 255, 0), np.uint8)  # green
+    image[20:60, 50:90] = (0, 0, 255)  # red patch
+    h = box_histogram(image, np.array([50, 20, 90, 60], np.float32))
+    assert h.sum() == pytest.approx(1.0) and h[0].sum() == pytest.approx(1.0)  # all in the red hue bins
+    h2 = box_histogram(image, np.array([-30, -30, 400, 400], np.float32))  # clipped to the image
+    assert h2.sum() == pytest.approx(1.0) and h2[0].sum() == pytest.approx(40 * 40 / (100 * 200))
+    assert box_histogram(image, np.array([150, 80, 150, 90], np.float32)).sum() == 0  # empty box
+    assert box_histogram(image, np.array([np.nan, 0, 10, 10], np.float32)).sum() == 0
+
+
+def test_frame_observation_runs_the_detector_and_colours_each_box():
+    image = np.zeros((48, 64, 3), np.uint8)
+    image[:, 32:] = (255, 0, 0)  # right half blue
+
+    class TwoPeople:
+        def detect(self, img):
+            assert img is image
+            kps = np.full((2, 17, 3), np.nan, np.float32)
+            kps[:, 0] = [[10, 10, 0.9], [50, 10, 0.8]]
+            return kps, np.array([[0, 0, 30, 48], [34, 0, 64, 48]], np.float32)
+
+        def close(self):
+            pass
+
+    obs = frame_observation("s", "c", 7, Frame(123, 64, 48, image, None), TwoPeople())
+    assert (obs.site, obs.camera, obs.seq, obs.stamp_ns, obs.width, obs.height) == ("s", "c", 7, 123, 64, 48)
+    assert len(obs.people) == 2
+    assert obs.people[0].histogram.sum() == pytest.approx(1.0) and obs.people[1].histogram.sum() == pytest.approx(1.0)
+    assert not np.array_equal(obs.people[0].histogram, obs.people[1].histogram)  # black vs blue
+    # A source that detected people itself keeps its histograms when it has no image ...
+    sim = SimCamera(World(load_site(SITE), 2, seed=1), "nw").observe(5 * 10**9)[0]
+    same = frame_observation("s", "c", 0, Frame(1, 1280, 720, None, sim.people))
+    assert same.people == sim.people
+    # ... and gets them from its image when it has one.
+    recoloured = frame_observation("s", "c", 0, Frame(1, 64, 48, image, obs.people))
+    assert np.array_equal(recoloured.people[1].histogram, obs.people[1].histogram)
+
+
+def _cli(capsys, *args: str) -> tuple[int, str]:
+    from superbody.edge.cli import main
+
+    try:
+        code = main(["edge", "run", *args])
+    except SystemExit as e:  # argparse's own errors
+        code = e.code
+    return code, capsys.readouterr().err
+
+
+def test_cli_source_errors_are_one_line_and_exit_2(capsys, tmp_path):
+    small = tmp_path / "small.avi"
+    writer = cv2.VideoWriter(str(small), cv2.VideoWriter_fourcc(*"MJPG"), 15.0, (64, 48))
+    for _ in range(3):
+        writer.write(np.zeros((48, 64, 3), np.uint8))
+    writer.release()
+    cases = [  # (arguments, text of the error)
+        (["--source", f"video:{small}"], f"--source video:{small} needs --detector, one of blazepose, yolo-pose:PATH.onnx, rtmo:PATH.onnx"),
+        (["--detector", "blazepose"], "--detector is for video, webcam and RTSP sources; --source sim detects people itself"),
+        (["--source", f"video:{small}", "--detector", "openpose"], "--detector must be one of blazepose"),
+        (["--source", f"video:{small}", "--detector", "blazepose"], f"video:{small} delivers 64x48 images but the site's camera is 1280x720"),
+        (["--source", f"video:{tmp_path / 'none.avi'}", "--detector", "blazepose"], "none.avi: no such file"),
+        (["--source", "webcam:x", "--detector", "blazepose"], "webcam index must be an integer in [0, 63], got 'x'"),
+        (["--nn-archive", "a.tar.xz"], "--nn-archive is for --source oak, not --source sim"),
+        (["--source", f"video:{small}", "--detector", "blazepose", "--people", "2"], "--people is for --source sim"),
+        (["--fast"], "--fast is for --source video, not --source sim"),
+        (["--source", f"video:{small}", "--detector", "blazepose", "--clock-scale", "2"], "--clock-scale and --clock-anchor-ns are for simulated sources"),
+        (["--source", f"video:{small}", "--detector", "blazepose", "--depth"], "--depth is for --source sim and oak"),
+        (["--source", "oak", "--detector", "blazepose"], "--detector is for video, webcam and RTSP sources; --source oak"),
+    ]
+    for args, message in cases:
+        code, err = _cli(capsys, "--site", SITE, "--camera", "nw", *args)
+        assert code == 2 and message in err, (args, err)
+        assert "Traceback" not in err
+        lines = [ln for ln in err.splitlines() if ln.startswith("superbody")]
+        assert len(lines) == 1 and lines[0].startswith("superbody edge run: error:"), err
+
+
+def test_cli_detector_that_cannot_open(capsys, tmp_path):
+    frame = np.zeros((720, 1280, 3), np.uint8)
+    clip = tmp_path / "hd.avi"
+    writer = cv2.VideoWriter(str(clip), cv2.VideoWriter_fourcc(*"MJPG"), 15.0, (1280, 720))
+    writer.write(frame)
+    writer.release()
+    code, err = _cli(capsys, "--site", SITE, "--camera", "nw", "--source", f"video:{clip}", "--detector", f"yolo-pose:{tmp_path / 'y.onnx'}")
+    assert code == 2 and f"superbody edge run: error: --detector yolo-pose:{tmp_path / 'y.onnx'}: model file" in err and "does not exist" in err
+
+
+def test_cli_oak_without_a_device_or_support_exits_2(capsys):
+    """Whatever is missing here (the depthai package, the OAK module, a device), one line and exit 2."""
+    code, err = _cli(capsys, "--site", SITE, "--camera", "nw", "--source", "oak:NO-SUCH-DEVICE")
+    assert code == 2 and err.strip().splitlines()[-1].startswith("superbody edge run: error:") and "oak" in err.lower(), err
+
+
+def test_video_node_publishes_the_person_where_the_photo_shows_them(processes, tmp_path):
+    """`edge run --source video:F --detector blazepose` on the apartment's camera 1: a real photo
+    in a real video through the real BlazePose; nose, eyes and shoulders within 30 px."""
+    clip = tmp_path / "astronaut.avi"
+    marks = astronaut_video(clip, frames=60, fps=15.0)  # 4 s
+    port = free_port()
+    lst = Listener(port, site="wtf-apartment")
+    try:
+        p = processes.start("edge", "run", "--site", str(WTF_SITE), "--camera", "1", "--source", f"video:{clip}",
+                            "--detector", "blazepose", "--connect", f"tcp/127.0.0.1:{port}")
+        _, err = p.communicate(timeout=60)  # the node ends with the file
+        assert p.returncode == 0, err
+        # 60 frames in 4 s; a loaded machine skips some (frames are dropped, not delayed).
+        assert lst.wait_for(lambda: len(lst.received["1"]) >= 5, timeout=5), (len(lst.received["1"]), err)
+    finally:
+        lst.close()
+    assert not lst.errors
+    observations = [o for _, o in lst.received["1"]]
+    stamps = np.array([o.stamp_ns for o in observations])
+    steps = np.diff(stamps) / (1e9 / 15)
+    assert np.allclose(steps, np.round(steps), atol=1e-5) and (np.round(steps) >= 1).all()  # on the file's frame grid
+    for obs in observations:
+        assert (obs.width, obs.height) == (640, 480) and len(obs.people) == 1
+        person = obs.people[0]
+        for name, (x, y) in marks.items():
+            u, v, _ = person.keypoints[INDEX[name]]
+            assert np.hypot(u - x, v - y) <= TOLERANCE_PX, (name, (u, v), (x, y))
+        assert person.histogram.sum() == pytest.approx(1.0, abs=1e-3)
+        x0, y0, x1, y1 = person.bbox
+        assert 0 <= x0 < x1 <= 640 and 0 <= y0 < y1 <= 480
