@@ -53,7 +53,7 @@ __all__ = [
 INPUT_NAMES: Final[tuple[str, ...]] = ("x", "adj", "mask")
 OUTPUT_NAME: Final[str] = "pose"
 STD_OUTPUT_NAME: Final[str] = "pose_std"  # optional (B, 3): the network's 1-sigma of x, y (m) and yaw (rad)
-META_STD_SCALE: Final[str] = "pose.std_scale"  # JSON [kx, ky, kyaw]: calibration of pose_std on held-out real data
+META_STD_SCALE: Final[str] = "pose.std_scale"  # JSON [kx, ky, kyaw], or a row per camera count 1, 2, 3+: pose_std calibrated on held-out real data
 META_POSE_FRAME: Final[str] = "pose.frame"  # "world" | "floor_centre"
 META_POSE_SCALE: Final[str] = "pose.scale"  # metres per unit of the network's raw output (informative)
 META_POSE_ORIGIN: Final[str] = "pose.origin"  # JSON [x, y]: origin of the raw output (informative)
@@ -156,12 +156,14 @@ class OnnxEstimator:
         self._inputs = [i.name for i in self.session.get_inputs()]
         self.has_std = STD_OUTPUT_NAME in [o.name for o in self.session.get_outputs()]
         try:
-            scale = json.loads(self.metadata.get(META_STD_SCALE, "[1, 1, 1]"))
-            self.std_scale = np.asarray(scale, dtype=np.float64).reshape(3)
-            if not (np.all(np.isfinite(self.std_scale)) and np.all(self.std_scale > 0)):
+            # [kx, ky, kyaw] for every person, or one such row per camera count 1, 2, 3+.
+            scale = np.asarray(json.loads(self.metadata.get(META_STD_SCALE, "[1, 1, 1]")), dtype=np.float64)
+            self.std_scale = np.broadcast_to(scale, (3, 3)).copy() if scale.shape in ((3,), (3, 3)) else None
+            if self.std_scale is None or not (np.all(np.isfinite(self.std_scale)) and np.all(self.std_scale > 0)):
                 raise ValueError
         except (ValueError, TypeError):
-            raise ModelMismatchError(f"{self.path}: metadata {META_STD_SCALE} must be 3 positive numbers, got {self.metadata.get(META_STD_SCALE)!r}") from None
+            raise ModelMismatchError(f"{self.path}: metadata {META_STD_SCALE} must be 3 positive numbers or 3 rows of them "
+                                     f"(cameras 1, 2, 3+), got {self.metadata.get(META_STD_SCALE)!r}") from None
 
     def _check(self, site: Site, variant: Variant | None) -> None:
         spec, where = self.spec, str(self.path)
@@ -235,5 +237,9 @@ class OnnxEstimator:
         names = [OUTPUT_NAME, STD_OUTPUT_NAME] if self.has_std else [OUTPUT_NAME]
         outs = self.session.run(names, {name: feeds[name] for name in self._inputs})
         pose = decode_output(outs[0], self.origin)
-        std = np.asarray(outs[1], np.float64) * self.std_scale if self.has_std else np.full((len(pose), 3), np.nan)
+        if self.has_std:
+            cams = np.clip([len(v) for v in view_sets], 1, 3) - 1
+            std = np.asarray(outs[1], np.float64) * self.std_scale[cams]  # (B, 3)
+        else:
+            std = np.full((len(pose), 3), np.nan)
         return pose, std

@@ -10,8 +10,10 @@ as ``hybrid.calibration``). Then:
    geometry's, more than ``floor_margin_m`` outside the site's floor polygon), the pose is the
    analytic one: label ``"analytic"``.
 2. **Fusion.** Otherwise each of x, y and yaw is the inverse-variance weighted mean of the two
-   (yaw as a weighted mean of unit vectors), with sigma = (1/s_net^2 + 1/s_geo^2)^-1/2: label
-   ``"hybrid"``. Where the geometry found nothing, the network's pose: label ``"onnx"``.
+   (yaw as a weighted mean of unit vectors), with sigma = (t/s_net^2 + 1/s_geo^2)^-1/2, where the
+   trust t per axis and camera count was fitted on held-out real data (a network whose real
+   errors are biased deserves less weight than its sigma says): label ``"hybrid"``. Where the
+   geometry found nothing, the network's pose: label ``"onnx"``.
 
 The fused sigma is what the host's filter uses as the measurement noise.
 """
@@ -47,18 +49,25 @@ class HybridCalibration:
             (x m, y m, yaw rad) when a shoulder or hip pair was seen.
         analytic_yaw_std_no_pair: the analytic yaw's 1-sigma without a shoulder or hip pair
             (from the head, or no yaw at all).
+        net_trust: per camera count 1, 2, 3+, how much the network's weight is trusted per axis
+            (x, y, yaw): its precision 1/sigma^2 is multiplied by this. 1 is plain inverse-variance
+            fusion; 0 leaves the axis to geometry (a network whose errors on real data are biased
+            is less useful than its sigma says: fitted on held-out real data).
         floor_margin_m: support gate: how far outside the floor polygon a pose may be.
         source: how the numbers were measured (free text, for the model card).
     """
 
     analytic_std: tuple[tuple[float, float, float], ...]
     analytic_yaw_std_no_pair: float = 3.0
+    net_trust: tuple[tuple[float, float, float], ...] = ((1.0, 1.0, 1.0),) * 3
     floor_margin_m: float = 0.5
     source: str = ""
 
     def __post_init__(self) -> None:
         if len(self.analytic_std) != 3 or any(len(s) != 3 or not all(0 < v < 100 for v in s) for s in self.analytic_std):
             raise ValueError(f"analytic_std must be 3 rows (1, 2, 3+ cameras) of 3 positive sigmas, got {self.analytic_std!r}")
+        if len(self.net_trust) != 3 or any(len(s) != 3 or not all(0 <= v <= 100 for v in s) for s in self.net_trust):
+            raise ValueError(f"net_trust must be 3 rows (1, 2, 3+ cameras) of 3 factors in [0, 100], got {self.net_trust!r}")
         if not 0 < self.analytic_yaw_std_no_pair < 100:
             raise ValueError(f"analytic_yaw_std_no_pair must be in (0, 100) radians, got {self.analytic_yaw_std_no_pair!r}")
         if not 0 <= self.floor_margin_m <= 10:
@@ -66,14 +75,21 @@ class HybridCalibration:
 
     def to_json(self) -> str:
         return json.dumps({"analytic_std": [list(s) for s in self.analytic_std], "analytic_yaw_std_no_pair": self.analytic_yaw_std_no_pair,
-                           "floor_margin_m": self.floor_margin_m, "source": self.source})
+                           "net_trust": [list(s) for s in self.net_trust], "floor_margin_m": self.floor_margin_m, "source": self.source})
 
     @classmethod
     def from_json(cls, text: str) -> "HybridCalibration":
         d = json.loads(text)
         return cls(analytic_std=tuple(tuple(float(v) for v in s) for s in d["analytic_std"]),
                    analytic_yaw_std_no_pair=float(d.get("analytic_yaw_std_no_pair", 3.0)),
+                   net_trust=tuple(tuple(float(v) for v in s) for s in d.get("net_trust", ((1.0, 1.0, 1.0),) * 3)),
                    floor_margin_m=float(d.get("floor_margin_m", 0.5)), source=str(d.get("source", "")))
+
+    def net_sigmas(self, net_std: NDArray, cameras: NDArray) -> NDArray[np.float64]:
+        """(B, 3) the network's sigmas as the fusion weighs them: sigma / sqrt(trust) (inf at 0)."""
+        trust = np.asarray(self.net_trust, dtype=np.float64)[np.clip(np.asarray(cameras, int), 1, 3) - 1]  # (B, 3)
+        with np.errstate(divide="ignore"):
+            return np.asarray(net_std, np.float64) / np.sqrt(trust)
 
     def analytic_sigmas(self, cameras: NDArray, pair: NDArray) -> NDArray[np.float64]:
         """(B, 3) analytic 1-sigma for camera counts (B,) and shoulder-or-hip-pair flags (B,)."""
@@ -139,8 +155,9 @@ class HybridEstimator:
             return Estimates(np.zeros((0, 3)), np.zeros((0, 3)), ())
         net, net_std = self.net.estimate_with_std(view_sets)
         geo, pair = self.analytic.estimate_with_pairs(view_sets)
-        geo_std = self.calibration.analytic_sigmas(np.array([len(v) for v in view_sets]), pair)
-        pose, std = fuse(net, net_std, geo, geo_std)
+        cams = np.array([len(v) for v in view_sets])
+        geo_std = self.calibration.analytic_sigmas(cams, pair)
+        pose, std = fuse(net, self.calibration.net_sigmas(net_std, cams), geo, geo_std)
         has_geo = np.isfinite(geo[:, :2]).all(1)
         margin = self.calibration.floor_margin_m
         outside = ~(_near_floor(net[:, :2], self.site, margin) & np.where(has_geo, _near_floor(np.nan_to_num(geo[:, :2]), self.site, margin), True))

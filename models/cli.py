@@ -188,17 +188,20 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
     cams = np.array([len(s.views) for s in samples])
     analytic, pair = hybrid.analytic_with_pairs(samples, site)
     try:
-        scale = hybrid.fit_std_scale(net, std, truth)
+        scale = hybrid.fit_std_scale(net, std, truth, cams)
         cal = hybrid.fit_analytic(analytic, pair, truth, cams, source=f"{args.dataset.name}, {len(samples)} samples; network sigmas from {args.cv.name}")
+        cal = hybrid.fit_trust(net, hybrid.scaled_std(std, scale, cams), analytic, pair, truth, cams, cal)
         lofo, lofo_std, source = hybrid.leave_one_fold_out(net, std, analytic, pair, truth, cams, fold, site)
     except ValueError as e:
         return _fail(command, str(e))
     reports = score(samples, {"hybrid (CV)": lofo, "network (CV)": net, "analytic": analytic}, offset)
-    coverage = {"network": hybrid.sigma_coverage(net, std * scale, truth), "hybrid": hybrid.sigma_coverage(lofo, lofo_std, truth)}
-    print(f"network sigma scale (x, y, yaw): {', '.join(f'{v:.2f}' for v in scale)}")
+    coverage = {"network": hybrid.sigma_coverage(net, hybrid.scaled_std(std, scale, cams), truth),
+                "hybrid": hybrid.sigma_coverage(lofo, lofo_std, truth)}
+    print("network sigma scale (x, y, yaw) by cameras: " + "; ".join(f"{k}: {', '.join(f'{v:.2f}' for v in row)}" for k, row in zip((1, 2, 3), scale)))
     print("analytic sigma by cameras (x mm, y mm, yaw deg): " + "; ".join(
         f"{k}: {s[0] * 1000:.0f}, {s[1] * 1000:.0f}, {np.degrees(s[2]):.1f}" for k, s in zip((1, 2, 3), cal.analytic_std))
         + f"; yaw without a shoulder/hip pair {np.degrees(cal.analytic_yaw_std_no_pair):.0f} deg")
+    print("trust in the network (x, y, yaw) by cameras: " + "; ".join(f"{k}: {', '.join(f'{v:g}' for v in row)}" for k, row in zip((1, 2, 3), cal.net_trust)))
     for name, cov in coverage.items():
         print(f"{name}: errors within 1 sigma (x, y, yaw) {', '.join(f'{v:.2f}' for v in cov['within_1_sigma'])}; "
               f"within 2 sigma {', '.join(f'{v:.2f}' for v in cov['within_2_sigma'])} (a calibrated Gaussian: 0.68, 0.95)")
@@ -208,7 +211,7 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
         hybrid.write_calibration(m, scale, cal)
         print(f"wrote the calibration into {m}")
     if args.json_out is not None:
-        doc = {"std_scale": [float(v) for v in scale], "calibration": json.loads(cal.to_json()), "coverage": coverage,
+        doc = {"std_scale": scale.tolist(), "calibration": json.loads(cal.to_json()), "coverage": coverage,
                "sources": {s: int((source == s).sum()) for s in ("hybrid", "onnx", "analytic")}, "reports": reports, "truth_offset_m": offset}
         args.json_out.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
         print(f"wrote {args.json_out}")

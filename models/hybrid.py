@@ -5,14 +5,17 @@
 
 Two things are measured and written into each model's metadata:
 
-- ``pose.std_scale``: the network's predicted 1-sigma (trained in simulation) times this per
-  axis matches its real errors. Fitted on the held-out predictions of a cross-validation
+- ``pose.std_scale``: the network's predicted 1-sigma (trained in simulation) times this, per
+  axis and per camera count (1, 2, 3+), matches its real errors. Fitted on the held-out predictions of a cross-validation
   (``superbody crossval --predictions-out``), robustly: the scale that makes the median of
   |error| / sigma equal 0.674, the median of |z| for a unit Gaussian (a few 180-degree yaw flips
   must not inflate every sigma).
 - ``hybrid.calibration``: the analytic estimator's 1-sigma per camera count (1, 2, 3+), from
   its errors on the real file (the geometry has no parameters fitted to it), the same robust
   way; its yaw sigma without a shoulder or hip pair separately.
+
+- ``hybrid.calibration``'s ``net_trust``: per camera count and axis, the factor on the network's
+  precision that minimises the fused error on the held-out predictions (0 = geometry alone).
 
 ``leave_one_fold_out`` scores the hybrid honestly on the cross-validation itself: each fold is
 fused with a calibration fitted on the other folds only.
@@ -21,6 +24,7 @@ fused with a calibration fitted on the other folds only.
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 from typing import Final, Sequence
 
@@ -33,7 +37,7 @@ from superbody.host.estimator import META_STD_SCALE
 from superbody.host.hybrid import META_HYBRID, HybridCalibration, _near_floor, fuse
 from superbody.models.samples import Sample
 
-__all__ = ["robust_sigma", "fit_std_scale", "fit_analytic", "hybrid_poses", "leave_one_fold_out", "sigma_coverage", "write_calibration"]
+__all__ = ["robust_sigma", "fit_std_scale", "scaled_std", "fit_trust", "TRUST_GRID", "fit_analytic", "hybrid_poses", "leave_one_fold_out", "sigma_coverage", "write_calibration"]
 
 _MEDIAN_ABS_Z: Final[float] = 0.6745  # median of |z| for z ~ N(0, 1)
 
@@ -50,17 +54,33 @@ def robust_sigma(err: NDArray) -> NDArray[np.float64]:
     return np.nanmedian(np.abs(np.asarray(err, np.float64)), axis=0) / _MEDIAN_ABS_Z
 
 
-def fit_std_scale(pred: NDArray, std: NDArray, truth: NDArray) -> NDArray[np.float64]:
-    """(3,) factors k with median(|error| / (k sigma)) = 0.6745 per axis.
+def fit_std_scale(pred: NDArray, std: NDArray, truth: NDArray, cameras: NDArray | None = None, min_samples: int = 20) -> NDArray[np.float64]:
+    """Factors k with median(|error| / (k sigma)) = 0.6745 per axis.
 
     Args:
         pred, std, truth: (N, 3) predictions, their predicted 1-sigma, torso truth.
+        cameras: (N,) camera counts: one row of factors per count 1, 2, 3+ (a count with fewer
+            than ``min_samples`` predictions gets the all-samples row).
+
+    Returns:
+        (3,) without ``cameras``, else (3, 3) rows for 1, 2, 3+ cameras.
     """
     z = np.abs(_errors(pred, truth)) / np.asarray(std, np.float64)
     ok = np.isfinite(z).all(1)
     if ok.sum() < 10:
         raise ValueError(f"fit_std_scale: {int(ok.sum())} usable predictions, need at least 10")
-    return np.median(z[ok], axis=0) / _MEDIAN_ABS_Z
+    overall = np.median(z[ok], axis=0) / _MEDIAN_ABS_Z
+    if cameras is None:
+        return overall
+    cams = np.clip(np.asarray(cameras), 1, 3)
+    rows = [np.median(z[ok & (cams == k)], axis=0) / _MEDIAN_ABS_Z if (ok & (cams == k)).sum() >= min_samples else overall for k in (1, 2, 3)]
+    return np.array(rows)
+
+
+def scaled_std(std: NDArray, scale: NDArray, cameras: NDArray) -> NDArray[np.float64]:
+    """(N, 3) sigmas times their scale: (3,) for all, or (3, 3) rows by camera count 1, 2, 3+."""
+    scale = np.broadcast_to(np.asarray(scale, np.float64), (3, 3))
+    return np.asarray(std, np.float64) * scale[np.clip(np.asarray(cameras), 1, 3) - 1]
 
 
 def fit_analytic(analytic: NDArray, pair: NDArray, truth: NDArray, cameras: NDArray, source: str = "") -> HybridCalibration:
@@ -97,7 +117,7 @@ def hybrid_poses(
         (N, 3) poses, (N, 3) sigmas and (N,) sources.
     """
     geo_std = calibration.analytic_sigmas(cameras, pair)
-    pose, std = fuse(net, net_std, analytic, geo_std)
+    pose, std = fuse(net, calibration.net_sigmas(net_std, cameras), analytic, geo_std)
     has_geo = np.isfinite(analytic[:, :2]).all(1)
     m = calibration.floor_margin_m
     outside = ~(_near_floor(net[:, :2], site, m) & np.where(has_geo, _near_floor(np.nan_to_num(analytic[:, :2]), site, m), True))
@@ -105,6 +125,35 @@ def hybrid_poses(
     pose = np.where((source == "onnx")[:, None], net, np.where((source == "analytic")[:, None], analytic, pose))
     std = np.where((source == "onnx")[:, None], net_std, np.where((source == "analytic")[:, None], geo_std, std))
     return pose, std, source
+
+
+TRUST_GRID: Final[tuple[float, ...]] = (0.0, 0.1, 0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 5.0, 10.0)
+
+
+def fit_trust(net: NDArray, net_std: NDArray, analytic: NDArray, pair: NDArray, truth: NDArray, cameras: NDArray,
+              calibration: HybridCalibration, min_samples: int = 10) -> HybridCalibration:
+    """The calibration with ``net_trust`` chosen per camera count and axis (from ``TRUST_GRID``)
+    to minimise the fused pose's mean absolute error against the truth; 1 where a count has fewer
+    than ``min_samples`` samples. Axes fuse independently, so each is searched on its own."""
+    cams = np.clip(np.asarray(cameras), 1, 3)
+    geo_std = calibration.analytic_sigmas(cams, pair)
+    ok = np.isfinite(analytic).all(1) & np.isfinite(net).all(1)
+    rows = []
+    for k in (1, 2, 3):
+        m = ok & (cams == k)
+        if m.sum() < min_samples:
+            rows.append((1.0, 1.0, 1.0))
+            continue
+        best = []
+        for axis in range(3):
+            maes = []
+            for t in TRUST_GRID:
+                s = net_std[m] / np.sqrt(t) if t > 0 else np.full_like(net_std[m], np.inf)
+                pose, _ = fuse(net[m], s, analytic[m], geo_std[m])
+                maes.append(float(np.mean(np.abs(_errors(pose, truth[m])[:, axis]))))
+            best.append(TRUST_GRID[int(np.argmin(maes))])
+        rows.append(tuple(best))
+    return replace(calibration, net_trust=tuple(rows))
 
 
 def leave_one_fold_out(
@@ -117,9 +166,11 @@ def leave_one_fold_out(
     source = np.full(len(net), "", dtype=object)
     for k in np.unique(fold):
         test, train = fold == k, fold != k
-        scale = fit_std_scale(net[train], net_std[train], truth[train])
+        scale = fit_std_scale(net[train], net_std[train], truth[train], cameras[train])
         cal = fit_analytic(analytic[train], pair[train], truth[train], cameras[train])
-        pose[test], std[test], source[test] = hybrid_poses(net[test], net_std[test] * scale, analytic[test], pair[test], cameras[test], cal, site)
+        cal = fit_trust(net[train], scaled_std(net_std[train], scale, cameras[train]), analytic[train], pair[train], truth[train], cameras[train], cal)
+        pose[test], std[test], source[test] = hybrid_poses(net[test], scaled_std(net_std[test], scale, cameras[test]), analytic[test],
+                                                           pair[test], cameras[test], cal, site)
     return pose, std, source.astype(str)
 
 
@@ -144,7 +195,7 @@ def write_calibration(model: str | Path, std_scale: NDArray, calibration: Hybrid
     import onnx
 
     proto = onnx.load(str(model))
-    meta = {META_STD_SCALE: json.dumps([round(float(v), 5) for v in std_scale]), META_HYBRID: calibration.to_json()}
+    meta = {META_STD_SCALE: json.dumps(np.round(np.asarray(std_scale, np.float64), 5).tolist()), META_HYBRID: calibration.to_json()}
     keep = [p for p in proto.metadata_props if p.key not in meta]
     del proto.metadata_props[:]
     proto.metadata_props.extend(keep)
