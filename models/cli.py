@@ -418,10 +418,11 @@ def _run_eval(args: argparse.Namespace) -> int:
         print(format_table(reports, args.truth_offset))
     try:
         if args.json_out is not None:
-            doc = json_report(reports, names, _BASELINE, args.truth_offset)
+            shown = names + [n for n in estimators if n.endswith(" (network)")]
+            doc = json_report(reports, shown, _BASELINE, args.truth_offset)
             doc["dataset"], doc["site"] = str(args.dataset), str(args.site)
             if temporal is not None:
-                doc["temporal"] = dict(json_report(temporal[0], names, _BASELINE, args.truth_offset), at=args.temporal_at,
+                doc["temporal"] = dict(json_report(temporal[0], shown, _BASELINE, args.truth_offset), at=args.temporal_at,
                                        replay=temporal[1], signature=_SIGNATURE_NOTE)
             args.json_out.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
             print(f"wrote {args.json_out}")
