@@ -20,16 +20,13 @@ __all__ = ["register", "build_estimator", "default_model"]
 log = logging.getLogger("superbody.host")
 
 ESTIMATORS = ("auto", "hybrid", "onnx", "analytic")
-_MODELS_DIR = Path(__file__).resolve().parents[1] / "models"
 
 
 def default_model(site: Site) -> Path | None:
-    """The shipped int8 model for the site (``models/<site>.int8.onnx``), if there is one."""
-    for base in (Path.cwd() / "models", _MODELS_DIR):
-        p = base / f"{site.name}.int8.onnx"
-        if p.is_file():
-            return p
-    return None
+    """The shipped int8 model for the site (``models/<site>.int8.onnx``, package data), if there is one."""
+    from superbody.edge.resources import model_path
+
+    return model_path(f"{site.name}.int8.onnx")
 
 
 def build_estimator(site: Site, kind: str = "auto", model: str | Path | None = None):
