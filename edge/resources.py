@@ -14,11 +14,17 @@ from importlib import resources
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
-__all__ = ["DEFAULT_SITE", "site_path", "shipped_sites", "model_path", "package_version"]
+__all__ = ["DEFAULT_SITE", "MESSAGES", "site_path", "shipped_sites", "model_path", "json_schema", "package_version"]
 
 SITES_PACKAGE = "superbody.sites"
 MODELS_PACKAGE = "superbody.models"
 DEFAULT_SITE = "wtf-apartment"  # the paper's apartment: the demo's and the tools' default
+# Message name -> (package, JSON Schema file beside its codec).
+MESSAGES = {
+    "observation": ("superbody.edge", "observation.schema.json"),  # edge/wire.py
+    "people": ("superbody.host", "people.schema.json"),  # host/pose.py
+    "status": ("superbody.host", "status.schema.json"),  # host/aggregator.py
+}
 
 
 def _folder(package: str) -> Path:
@@ -50,6 +56,18 @@ def model_path(file_name: str) -> Path | None:
     """A shipped model file (e.g. ``wtf-apartment.int8.onnx``), or None if there is none."""
     p = _folder(MODELS_PACKAGE) / file_name
     return p if p.is_file() else None
+
+
+def json_schema(message: str) -> bytes:
+    """The JSON Schema (draft 2020-12) of a message: ``"observation"``, ``"people"`` or ``"status"``.
+
+    Raises:
+        ValueError: unknown message name (listing the valid ones).
+    """
+    if message not in MESSAGES:
+        raise ValueError(f"unknown message {message!r}; messages: {', '.join(MESSAGES)}")
+    package, name = MESSAGES[message]
+    return (_folder(package) / name).read_bytes()
 
 
 def package_version() -> str:

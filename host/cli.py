@@ -125,3 +125,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     from superbody.host import demo
 
     demo.register(sub)
+
+    from superbody.host import record, view
+
+    record.register(sub)
+    view.register(sub)
