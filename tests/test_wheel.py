@@ -61,7 +61,8 @@ def test_wheel_holds_one_namespace_and_the_shipped_files(installed):
     assert "superbody" in tops and all(t == "superbody" or t.endswith(".dist-info") for t in tops), tops
     for shipped in ("superbody/sites/wtf-apartment.toml", "superbody/sites/lab-example.toml",
                     "superbody/models/wtf-apartment.int8.onnx", "superbody/models/site-independent.int8.onnx",
-                    "superbody/edge/py.typed", "superbody/host/py.typed", "superbody/models/py.typed"):
+                    "superbody/edge/py.typed", "superbody/host/py.typed", "superbody/models/py.typed",
+                    "superbody/edge/observation.schema.json", "superbody/host/people.schema.json", "superbody/host/status.schema.json"):
         assert shipped in names, shipped
     # Nothing named edge, host or models at the top of site-packages.
     assert not [p.name for p in installed["site"].iterdir() if p.name in ("edge", "host", "models")]
