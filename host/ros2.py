@@ -241,6 +241,12 @@ def open_from_args(args: argparse.Namespace):
 
     from superbody.edge import transport
 
+    config = Ros2Config(topic=args.ros2_topic, domain_id=args.ros2_domain)
+    _typestore()  # rosbags present (ImportError) before any session is opened
     conf = transport.session_config("peer" if args.mode == "router" else args.mode, args.connect or args.listen, [], args.config)
     session = zenoh.open(conf)
-    return session, Ros2Publisher(session, Ros2Config(topic=args.ros2_topic, domain_id=args.ros2_domain))
+    try:
+        return session, Ros2Publisher(session, config)
+    except BaseException:
+        session.close()
+        raise
