@@ -40,6 +40,7 @@ import numpy as np  # noqa: E402
 
 from superbody.edge import transport, wire  # noqa: E402
 from superbody.edge.camera import Camera, look_at_rotation  # noqa: E402
+from superbody.edge.resources import model_path  # noqa: E402
 from superbody.edge.simulator import SimCamera, World  # noqa: E402
 from superbody.edge.site import Site, dump_site  # noqa: E402
 from superbody.host import pose as pose_msg  # noqa: E402
@@ -218,7 +219,7 @@ def main(model: str | None, seconds: float, use_zenoh: bool, json_out: str | Non
 
 if __name__ == "__main__":
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--model", default=str(ROOT / "models" / "site-independent.int8.onnx"), help="a rays-variant model")
+    p.add_argument("--model", default=str(model_path("site-independent.int8.onnx")), help="a rays-variant model")
     p.add_argument("--seconds", type=float, default=6.0, help="simulated seconds per configuration")
     p.add_argument("--zenoh", action="store_true", help="also measure end to end over loopback Zenoh, host in its own process")
     p.add_argument("--json-out")

@@ -21,6 +21,7 @@ sys.path.insert(0, str(ROOT))
 
 import onnxruntime as ort  # noqa: E402
 
+from superbody.edge.resources import model_path, site_path  # noqa: E402
 from superbody.edge.site import load_site  # noqa: E402
 from superbody.host.graph import GraphSpec, build_batch  # noqa: E402
 from superbody.models.simdata import SimDataConfig, generate  # noqa: E402
@@ -69,8 +70,8 @@ def main(model: Path, site_path: Path, seconds: float, json_out: str | None) -> 
 
 if __name__ == "__main__":
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--model", type=Path, default=ROOT / "models" / "wtf-apartment.int8.onnx")
-    p.add_argument("--site", type=Path, default=ROOT / "deploy" / "sites" / "wtf-apartment.toml")
+    p.add_argument("--model", type=Path, default=model_path("wtf-apartment.int8.onnx"))
+    p.add_argument("--site", type=Path, default=site_path("wtf-apartment"))
     p.add_argument("--seconds", type=float, default=3.0, help="time per measurement")
     p.add_argument("--json-out")
     a = p.parse_args()

@@ -40,9 +40,16 @@ def int_in(lo: int, hi: int, name: str):
     return parse
 
 
+def _version() -> str:
+    from superbody.edge.resources import package_version
+
+    return package_version()
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="superbody", description="Multi-camera torso pose appliance.")
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    parser.add_argument("--version", action="version", version=f"superbody {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for ep in sorted(entry_points(group="superbody.commands"), key=lambda e: e.name):
         ep.load()(sub)

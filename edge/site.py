@@ -48,6 +48,7 @@ __all__ = ["Site", "Obstacle", "SiteError", "load_site", "parse_site", "dump_sit
 
 # Site and camera ids become Zenoh key chunks: keep them to a safe alphabet.
 NAME_RE = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
+_MAX_DESCRIPTION = 10_000
 
 
 class SiteError(ValueError):
@@ -72,6 +73,7 @@ class Site:
     floor: tuple[tuple[float, float], ...]
     obstacles: tuple[Obstacle, ...] = ()
     source: str = ""
+    description: str = ""  # [site].description: free text for people, kept by dump_site
 
     @property
     def camera_ids(self) -> tuple[str, ...]:
@@ -194,6 +196,10 @@ def parse_site(doc: dict, *, path: str = "") -> Site:
     site_t = _table(doc, "site", path=path)
     _unknown(site_t, {"name", "description"}, "[site]", path=path)
     name = _name(site_t.get("name"), "site.name", path=path)
+    description = site_t.get("description", "")
+    if not isinstance(description, str) or len(description) > _MAX_DESCRIPTION:
+        raise SiteError(f"{_where(path, 'site.description')} must be a string of at most {_MAX_DESCRIPTION} characters, got {type(description).__name__}"
+                        + (f" of {len(description)}" if isinstance(description, str) else ""))
 
     floor_t = _table(doc, "floor", path=path)
     _unknown(floor_t, {"polygon"}, "[floor]", path=path)
@@ -232,7 +238,7 @@ def parse_site(doc: dict, *, path: str = "") -> Site:
     dupes = sorted({i for i in ids if ids.count(i) > 1})
     if dupes:
         raise SiteError(f"{_where(path, 'cameras')}: camera ids must be unique, repeated: {', '.join(dupes)}")
-    return Site(name=name, cameras=cameras, floor=floor, obstacles=tuple(obstacles), source=path)
+    return Site(name=name, cameras=cameras, floor=floor, obstacles=tuple(obstacles), source=path, description=description)
 
 
 def load_site(path: str | Path) -> Site:
@@ -257,16 +263,31 @@ def _fmt(v: float) -> str:
     return repr(float(round(v, 9)))
 
 
+def _str(text: str) -> str:
+    """A TOML string literal, quoted and escaped by tomli-w (quotes, backslashes, control characters)."""
+    import tomli_w
+
+    return tomli_w.dumps({"s": text})[len("s = "):].rstrip("\n")
+
+
 def dump_site(site: Site, header: str = "") -> str:
-    """The site as TOML text that ``load_site`` reads back to an equal ``Site``."""
-    out = [f"# {line}" for line in header.splitlines()]
-    out += ["[site]", f'name = "{site.name}"', "", "[floor]"]
+    """The site as TOML text that ``load_site`` reads back to an equal ``Site``.
+
+    Numbers are written compactly (rounded to 1e-9, arrays on one line); every string (the
+    description, an obstacle named ``Bob's "big" table``) goes through tomli-w, so it is quoted
+    and escaped as TOML requires. ``header`` becomes ``#`` comment lines on top.
+    """
+    out = [f"# {line}" if line else "#" for line in header.splitlines()]
+    out += ["[site]", f"name = {_str(site.name)}"]
+    if site.description:
+        out.append(f"description = {_str(site.description)}")
+    out += ["", "[floor]"]
     out.append("polygon = [" + ", ".join(f"[{_fmt(x)}, {_fmt(y)}]" for x, y in site.floor) + "]")
     for o in site.obstacles:
-        out += ["", "[[obstacles]]", f'name = "{o.name}"', f"min = [{', '.join(map(_fmt, o.min))}]", f"max = [{', '.join(map(_fmt, o.max))}]"]
+        out += ["", "[[obstacles]]", f"name = {_str(o.name)}", f"min = [{', '.join(map(_fmt, o.min))}]", f"max = [{', '.join(map(_fmt, o.max))}]"]
     for c in site.cameras:
         out += [
-            "", "[[cameras]]", f'id = "{c.id}"', f"width = {c.width}", f"height = {c.height}", f"fps = {_fmt(c.fps)}",
+            "", "[[cameras]]", f"id = {_str(c.id)}", f"width = {c.width}", f"height = {c.height}", f"fps = {_fmt(c.fps)}",
             f"fx = {_fmt(c.fx)}", f"fy = {_fmt(c.fy)}", f"cx = {_fmt(c.cx)}", f"cy = {_fmt(c.cy)}",
             f"dist = [{', '.join(map(_fmt, c.dist))}]",
             f"position = [{', '.join(map(_fmt, c.position))}]",

@@ -20,16 +20,13 @@ __all__ = ["register", "build_estimator", "default_model"]
 log = logging.getLogger("superbody.host")
 
 ESTIMATORS = ("auto", "hybrid", "onnx", "analytic")
-_MODELS_DIR = Path(__file__).resolve().parents[1] / "models"
 
 
 def default_model(site: Site) -> Path | None:
-    """The shipped int8 model for the site (``models/<site>.int8.onnx``), if there is one."""
-    for base in (Path.cwd() / "models", _MODELS_DIR):
-        p = base / f"{site.name}.int8.onnx"
-        if p.is_file():
-            return p
-    return None
+    """The shipped int8 model for the site (``models/<site>.int8.onnx``, package data), if there is one."""
+    from superbody.edge.resources import model_path
+
+    return model_path(f"{site.name}.int8.onnx")
 
 
 def build_estimator(site: Site, kind: str = "auto", model: str | Path | None = None):
@@ -98,9 +95,33 @@ def _run_host(args: argparse.Namespace) -> int:
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
-    result = run_host(conf, Aggregator(site, estimator, name, config), clock, stop, args.duration, serial)
+    ros2 = _open_ros2(args)
+    if ros2 is False:
+        return 2
+    try:
+        result = run_host(conf, Aggregator(site, estimator, name, config), clock, stop, args.duration, serial,
+                          on_publish=ros2[1].publish if ros2 else None)
+    finally:
+        if ros2:
+            ros2[1].close()
+            ros2[0].close()
     log.info("host stopped: %s", result)
     return 0
+
+
+def _open_ros2(args: argparse.Namespace):
+    """``host run --ros2``: (session, host.ros2.Ros2Publisher), None without the flag, False after an error."""
+    if not args.ros2:
+        return None
+    try:
+        from superbody.host import ros2
+
+        return ros2.open_from_args(args)
+    except ImportError:
+        print("superbody host run: error: --ros2 needs the rosbags package: pip install 'superbody[ros2]'", file=sys.stderr)
+    except ValueError as e:
+        print(f"superbody host run: error: {e}", file=sys.stderr)
+    return False
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -123,8 +144,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--duration", type=positive, default=None, help="stop after this many seconds")
     add_clock_args(p)
     transport.add_session_args(p)
+    from superbody.host import ros2
+
+    ros2.add_args(p)
     p.set_defaults(func=_run_host)
 
     from superbody.host import demo
 
     demo.register(sub)
+
+    from superbody.host import record, view
+
+    record.register(sub)
+    view.register(sub)

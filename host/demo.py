@@ -32,6 +32,7 @@ from scipy.optimize import linear_sum_assignment
 
 from superbody.edge import transport, wire
 from superbody.edge.cli import int_in, positive
+from superbody.edge.resources import site_path
 from superbody.edge.clock import WorldClock
 from superbody.edge.angles import wrap_angle
 from superbody.edge.simulator import SimCamera, World
@@ -42,8 +43,7 @@ __all__ = ["DemoConfig", "run_demo", "register"]
 
 log = logging.getLogger("superbody.demo")
 
-_ROOT = Path(__file__).resolve().parents[1]
-DEFAULT_SITE = _ROOT / "deploy" / "sites" / "wtf-apartment.toml"
+DEFAULT_SITE = site_path("wtf-apartment")  # shipped with the package (edge/resources.py)
 _MATCH_GATE_M = 1.0
 
 
@@ -202,7 +202,7 @@ def _spawn(args: list[str], log_path: Path) -> subprocess.Popen:
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     out = open(log_path, "w")
     return subprocess.Popen([sys.executable, "-m", "superbody.edge.cli", *args], stdout=out, stderr=subprocess.STDOUT, env=env,
-                            cwd=_ROOT, start_new_session=True)
+                            start_new_session=True)
 
 
 def run_demo(cfg: DemoConfig, stop: threading.Event | None = None) -> dict:
@@ -211,6 +211,7 @@ def run_demo(cfg: DemoConfig, stop: threading.Event | None = None) -> dict:
 
     stop = stop or threading.Event()
     site = load_site(cfg.site)
+    site_file = str(Path(cfg.site).resolve())  # the processes get absolute paths: no dependence on their folder
     log_dir = Path(cfg.log_dir or tempfile.mkdtemp(prefix="superbody-demo-"))
     log_dir.mkdir(parents=True, exist_ok=True)
     endpoint = f"tcp/127.0.0.1:{cfg.port}"
@@ -222,12 +223,12 @@ def run_demo(cfg: DemoConfig, stop: threading.Event | None = None) -> dict:
     try:
         procs["router"] = _spawn(["router", "--listen", endpoint], log_dir / "router.log")
         for cam in site.camera_ids:
-            procs[f"camera-{cam}"] = _spawn(["edge", "run", "--site", cfg.site, "--camera", cam, "--source", "sim",
+            procs[f"camera-{cam}"] = _spawn(["edge", "run", "--site", site_file, "--camera", cam, "--source", "sim",
                                             "--seed", str(cfg.seed), "--people", str(cfg.people), *common],
                                            log_dir / f"camera-{cam}.log")
-        host_args = ["host", "run", "--site", cfg.site, "--estimator", cfg.estimator, *common, *cfg.extra_host_args]
+        host_args = ["host", "run", "--site", site_file, "--estimator", cfg.estimator, *common, *cfg.extra_host_args]
         if cfg.model:
-            host_args += ["--model", cfg.model]
+            host_args += ["--model", str(Path(cfg.model).resolve())]
         procs["host"] = _spawn(host_args, log_dir / "host.log")
         print(f"superbody demo: router on {endpoint}, {len(site.cameras)} cameras and the host started; logs in {log_dir}", file=sys.stderr)
 

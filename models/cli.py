@@ -16,6 +16,8 @@ import sys
 import tomllib
 from pathlib import Path
 
+from superbody.edge.resources import site_path
+
 __all__ = ["register"]
 
 
@@ -72,7 +74,7 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
     )
     h.add_argument("--cv", type=Path, required=True, metavar="CV.npz", help="held-out predictions from superbody crossval --predictions-out")
     h.add_argument("--dataset", type=Path, required=True, metavar="PATH.json", help="the WheresTheFellow file the cross-validation used")
-    h.add_argument("--site", type=Path, default=Path("deploy/sites/wtf-apartment.toml"), metavar="SITE.toml", help="site file (default: %(default)s)")
+    h.add_argument("--site", type=Path, default=site_path("wtf-apartment"), metavar="SITE.toml", help="site file (default: the shipped wtf-apartment)")
     h.add_argument("--model", type=Path, action="append", default=[], metavar="M.onnx", help="model to write the calibration into (repeatable)")
     h.add_argument("--json-out", type=Path, metavar="F", help="write the calibration, coverage and scores as JSON")
     h.set_defaults(func=_run_calibrate_hybrid)
@@ -297,7 +299,7 @@ def _run_calibrate_oak_intrinsics(args: argparse.Namespace) -> int:
 
 # --- eval ---------------------------------------------------------------------------------------
 
-_DEFAULT_SITE = "deploy/sites/wtf-apartment.toml"
+_DEFAULT_SITE = "wtf-apartment"  # a shipped site (edge/resources.py)
 _BASELINE = "analytic"
 # The truth offset is a physical distance on a person: anything beyond a metre is a typo.
 _MAX_TRUTH_OFFSET_M = 1.0
@@ -333,7 +335,7 @@ def _add_eval(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--temporal-at", choices=_TEMPORAL_AT, default="first",
                    help="with --temporal, score each sample when its first view (its time) or its last view is in (default: %(default)s)")
-    p.add_argument("--site", type=Path, default=Path(_DEFAULT_SITE), metavar="SITE.toml", help="site file (default: %(default)s)")
+    p.add_argument("--site", type=Path, default=site_path(_DEFAULT_SITE), metavar="SITE.toml", help=f"site file (default: the shipped {_DEFAULT_SITE})")
     p.add_argument("--json-out", type=Path, metavar="F", help="write the first model's metrics, the baseline's and the per-camera breakdown as JSON")
     p.add_argument("--predictions-out", type=Path, metavar="F.csv",
                    help="write the first model's predictions in the dataset's frame: index,timestamp_ms,x_mm,z_mm,angle_rad")

@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 
 from superbody.edge.angles import wrap_angle
 from superbody.edge.floor import point_in_polygon, views_at
+from superbody.edge.resources import site_path
 from superbody.edge.site import Site
 
 __all__ = ["cell_errors", "coverage_figures", "register"]
@@ -174,7 +175,7 @@ def _run(args: argparse.Namespace) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("coverage", help="maps of where a model was trained and of its simulated error across the floor (PNG)")
-    p.add_argument("--site", default="deploy/sites/wtf-apartment.toml", help="site file")
+    p.add_argument("--site", default=str(site_path("wtf-apartment")), help="site file (default: the shipped wtf-apartment)")
     p.add_argument("--model", help="ONNX model (default: the site's shipped one)")
     p.add_argument("--out", required=True, help="folder for coverage.png and error-by-cell.png")
     p.add_argument("--dataset", help="a WheresTheFellow file whose path to draw (e.g. dev.json)")

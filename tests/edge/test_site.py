@@ -103,3 +103,38 @@ def test_dump_round_trip(tmp_path):
         np.testing.assert_allclose(a.R, b.R, atol=1e-8)
         np.testing.assert_allclose(a.t, b.t, atol=1e-8)
         assert (a.fx, a.fy, a.cx, a.cy, a.dist, a.fps) == (b.fx, b.fy, b.cx, b.cy, b.dist, b.fps)
+
+
+# Strings TOML must escape (the obstacle's name and the description are free text).
+ODD_TEXT = [
+    'Bob\'s "big" table',  # both quotes
+    "back\\slash and a tab\t",  # backslash, control character
+    "multi\nline",  # newline
+    "unicode: café ☕",
+]
+
+
+@pytest.mark.parametrize("text", ODD_TEXT)
+def test_dump_escapes_strings_and_keeps_the_description(tmp_path, text):
+    from dataclasses import replace
+
+    from superbody.edge.site import Obstacle
+
+    site = load_site(LAB)
+    assert site.description.startswith("Four 720p webcams")  # the lab file has one
+    odd = replace(site, description=text, obstacles=(Obstacle(text, (0.0, 0.0, 0.0), (1.0, 1.0, 1.0)), *site.obstacles))
+    out = tmp_path / "odd.toml"
+    out.write_text(dump_site(odd, header="line one\n\nline three"), encoding="utf-8")
+    again = load_site(out)
+    assert again.description == text
+    assert again.obstacles == odd.obstacles
+    assert load_site(tmp_path / "odd.toml").name == site.name
+    # And the plain lab file keeps its description through a round trip.
+    plain = tmp_path / "plain.toml"
+    plain.write_text(dump_site(site))
+    assert load_site(plain).description == site.description
+
+
+def test_description_must_be_a_string():
+    with pytest.raises(SiteError, match="site.description"):
+        parse_site(_set(_doc(), "site.description", 5))
