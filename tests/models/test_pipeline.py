@@ -4,9 +4,11 @@ quantise -> evaluate on the real dev.json; and a tiny blocked cross-validation."
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 
+import numpy as np
 import onnx
 import pytest
 
@@ -47,15 +49,46 @@ def test_eval_on_dev_json(tiny, dev_json, tmp_path):
     assert len((tmp_path / "pred.csv").read_text().splitlines()) == 226
 
 
-def test_crossval_predicts_every_sample_from_a_model_that_never_saw_it(dev_json, tmp_path):
-    out = tmp_path / "cv.json"
-    r = _cli("crossval", "--site", str(WTF_SITE), "--real", str(dev_json), "--folds", "3", "--arch", "mlp",
-             "--sim-samples", "300", "--epochs", "1", "--real-repeat", "2", "--json-out", str(out))
+@pytest.mark.parametrize("split", ["time", "space"])
+def test_crossval_predicts_every_sample_from_a_model_that_never_saw_it(split, dev_json, tmp_path):
+    out, npz = tmp_path / "cv.json", tmp_path / "cv.npz"
+    r = _cli("crossval", "--site", str(WTF_SITE), "--real", str(dev_json), "--folds", "3", "--arch", "mlp", "--split", split,
+             "--sim-samples", "300", "--epochs", "1", "--real-repeat", "2", "--json-out", str(out), "--predictions-out", str(npz))
     assert r.returncode == 0, r.stderr[-2000:]
     doc = json.loads(out.read_text())
-    assert [f["held_out"] for f in doc["folds"]] == [[0, 75], [75, 150], [150, 225]]
+    held = [f["held_out"] for f in doc["folds"]]
+    assert sum(held) == 225 and doc["split"] == split
+    if split == "time":
+        assert held == [75, 75, 75]
+    else:  # floor regions: each fold also keeps its 0.3 m surroundings out of training
+        assert all(f["excluded"] >= f["held_out"] for f in doc["folds"])
     assert doc["model"]["samples"] == 225 and doc["model"]["failed"] == 0
     assert doc["analytic"]["samples"] == 225
+    z = np.load(npz)
+    assert sorted(set(z["fold"].tolist())) == [1, 2, 3]
+    assert np.isfinite(z["predictions"]).all() and (z["std"] > 0).all()
+
+
+def test_calibrate_hybrid_writes_the_model_that_the_host_then_runs_as_hybrid(tiny, dev_json, tmp_path):
+    npz = tmp_path / "cv.npz"
+    r = _cli("crossval", "--site", str(WTF_SITE), "--real", str(dev_json), "--folds", "3", "--arch", "gat", "--split", "space",
+             "--hparams", '{"hidden": 16, "heads": 2, "layers": 2}', "--sim-samples", "300", "--epochs", "1", "--real-repeat", "2",
+             "--predictions-out", str(npz))
+    assert r.returncode == 0, r.stderr[-2000:]
+    model = tmp_path / "m.int8.onnx"
+    shutil.copy(tiny / "tiny.int8.onnx", model)
+    r = _cli("calibrate", "hybrid", "--cv", str(npz), "--dataset", str(dev_json), "--model", str(model), "--json-out", str(tmp_path / "h.json"))
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "trust in the network" in r.stdout and "hybrid (CV)" in r.stdout
+    doc = json.loads((tmp_path / "h.json").read_text())
+    assert len(doc["std_scale"]) == 3 and sum(doc["sources"].values()) == 225
+    meta = {p.key: p.value for p in onnx.load(str(model)).metadata_props}
+    assert "hybrid.calibration" in meta and "pose.std_scale" in meta
+    r = _cli("eval", "--dataset", str(dev_json), "--model", str(model))
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "m.int8.onnx (network)" in r.stdout  # the hybrid is scored beside its network alone
+    r = _cli("calibrate", "hybrid", "--cv", str(tmp_path / "h.json"), "--dataset", str(dev_json))
+    assert r.returncode == 2 and "not a crossval predictions file" in r.stderr
 
 
 # (arguments, text the one-line error must contain)
