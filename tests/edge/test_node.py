@@ -88,7 +88,11 @@ def test_three_nodes_publish_decodable_observations_at_their_fps(processes, list
         rate = (len(listener.received[c]) - counts0[c]) / elapsed
         assert abs(rate - 15.0) <= 1.5, f"camera {c}: {rate:.2f} msgs/s, expected 15 +- 10%"
         stamps = np.array([o.stamp_ns for _, o in listener.received[c]])
-        np.testing.assert_allclose(np.diff(stamps), 1e9 / 15, rtol=0.01)  # capture grid at the fps
+        # Capture grid at the fps: every gap a whole number of periods (a node that falls behind
+        # skips to the next frame in the future, by design), nearly all of them one period.
+        periods = np.diff(stamps) / (1e9 / 15)
+        np.testing.assert_allclose(periods, np.round(periods), atol=0.01)
+        assert periods.min() >= 0.99 and np.mean(np.round(periods) == 1) >= 0.95, periods
         seqs = [o.seq for _, o in listener.received[c]]
         assert seqs == sorted(seqs)
     assert {c for c, kind in listener.alive if kind == "PUT"} >= set(cams)
