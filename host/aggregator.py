@@ -144,9 +144,9 @@ class Aggregator:
         if obs.stamp_ns > now_ns + self.config.max_future_s * _NS:
             return self._reject("future_stamp", f"camera {obs.camera}: stamp {(obs.stamp_ns - now_ns) / _NS:.1f} s ahead of the host clock")
         why = self.tracker.admit(obs, now_ns)
+        self.tracker.update(obs, now_ns)  # a refused frame is counted (and remembered) there too
         if why is not None:
             return self._reject(why, f"camera {obs.camera}: frame {obs.seq} stamped {obs.stamp_ns} ({_DROP_DETAIL.get(why, why)})")
-        self.tracker.update(obs, now_ns)
         self.accepted += 1
         return True
 
