@@ -51,9 +51,15 @@ def build_estimator(site: Site, kind: str = "onnx", model: str | Path | None = N
                          "pass --model M.onnx or --estimator analytic")
     if not path.is_file():
         raise ValueError(f"--model {path}: no such file")
-    from superbody.host.estimator import OnnxEstimator
+    from superbody.host.estimator import ModelMismatchError, OnnxEstimator
 
-    return OnnxEstimator(path, site), f"onnx:{path.name}"
+    try:
+        return OnnxEstimator(path, site), f"onnx:{path.name}"
+    except ModelMismatchError:
+        raise
+    except Exception as e:  # onnxruntime's own errors: an empty, truncated or non-ONNX file
+        why = " ".join(str(e).split())[:200]
+        raise ValueError(f"--model {path}: not a loadable ONNX model ({path.stat().st_size} bytes): {why}") from None
 
 
 def _unit(text: str) -> float:

@@ -324,7 +324,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=7, help="simulator seed (default 7)")
     p.add_argument("--duration", type=positive, default=None, help="stop after this many simulated seconds (default: Ctrl-C)")
     p.add_argument("--clock-scale", type=positive, default=1.0, help="simulated seconds per wall second (default 1)")
-    p.add_argument("--port", type=int, default=7447, help="loopback port of the demo's Zenoh router (default 7447)")
+    p.add_argument("--port", type=int_in(1, 65535, "--port"), default=7447, help="loopback port of the demo's Zenoh router (default 7447)")
     p.add_argument("--estimator", choices=("onnx", "analytic"), default="onnx", help="pose estimator (default: the shipped int8 model)")
     p.add_argument("--model", help="ONNX model (default: models/<site>.int8.onnx)")
     p.add_argument("--kill-camera", metavar="ID", help="kill this camera's process mid-run (fault injection)")
