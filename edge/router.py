@@ -20,12 +20,12 @@ log = logging.getLogger("superbody.router")
 
 
 def run_router(listen: list[str], stop: threading.Event, config_file: str | None = None) -> None:
-    """Run a router listening on ``listen`` until ``stop`` is set."""
+    """Run a router listening on ``listen`` (empty: the config file's endpoints) until ``stop`` is set."""
     import zenoh
 
-    conf = transport.session_config("router", connect=[], listen=listen, config_file=config_file)
+    conf = transport.session_config("router", connect=[], listen=listen or None, config_file=config_file)
     with zenoh.open(conf):
-        log.info("zenoh router listening on %s", ", ".join(listen))
+        log.info("zenoh router listening on %s", ", ".join(listen) if listen else conf.get_json("listen/endpoints"))
         stop.wait()
 
 
@@ -34,7 +34,7 @@ def _run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     try:
-        run_router(args.listen or [transport.DEFAULT_ENDPOINT], stop, args.config)
+        run_router(args.listen or ([] if args.config else [transport.DEFAULT_ENDPOINT]), stop, args.config)
     except transport.ConfigError as e:
         print(f"superbody router: error: {e}", file=sys.stderr)
         return 2

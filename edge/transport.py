@@ -128,7 +128,7 @@ def camera_from_key(key: str) -> str | None:
 
 
 def session_config(
-    mode: Mode = "peer",
+    mode: Mode | None = "peer",
     connect: list[str] | None = None,
     listen: list[str] | None = None,
     config_file: str | None = None,
@@ -136,7 +136,7 @@ def session_config(
     """Build a Zenoh config.
 
     Args:
-        mode: peer, client or router.
+        mode: peer, client or router; None keeps the config file's (peer without one).
         connect: endpoints to connect to; None means ``[DEFAULT_ENDPOINT]`` unless listening.
         listen: endpoints to listen on; None means loopback only (``LOOPBACK_LISTEN``) for a
             peer without a config file.
@@ -150,7 +150,9 @@ def session_config(
     """
     import zenoh
 
-    if mode not in ("peer", "client", "router"):
+    if mode is None and not config_file:
+        mode = "peer"
+    if mode is not None and mode not in ("peer", "client", "router"):
         raise ConfigError(f"mode must be one of peer, client, router; got {mode!r}")
     for e in connect or ():
         check_endpoint(e, "--connect")
@@ -164,7 +166,8 @@ def session_config(
             raise ConfigError(f"--config {config_file}: not a readable Zenoh JSON5 config: {why}") from None
     else:
         conf = zenoh.Config()
-    conf.insert_json5("mode", json.dumps(mode))
+    if mode is not None:
+        conf.insert_json5("mode", json.dumps(mode))
     if connect is None:
         connect = [] if (listen or config_file or mode == "router") else [DEFAULT_ENDPOINT]
     if connect or not config_file:
@@ -185,7 +188,7 @@ def session_config(
 def add_session_args(parser: argparse.ArgumentParser) -> None:
     """Add the Zenoh examples' session options to a parser."""
     g = parser.add_argument_group("zenoh session")
-    g.add_argument("--mode", choices=("peer", "client", "router"), default="peer", help="Zenoh mode (default: peer)")
+    g.add_argument("--mode", choices=("peer", "client", "router"), default=None, help="Zenoh mode (default: the --config file's, else peer)")
     g.add_argument("-e", "--connect", action="append", metavar="ENDPOINT", help=f"endpoint to connect to (repeatable; default {DEFAULT_ENDPOINT})")
     g.add_argument("-l", "--listen", action="append", metavar="ENDPOINT", help="endpoint to listen on (repeatable)")
     g.add_argument("-c", "--config", metavar="FILE", help="Zenoh JSON5 configuration file")
