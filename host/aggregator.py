@@ -4,9 +4,9 @@ Two layers:
 
 - ``Aggregator``: pure and clock-injected. ``ingest()`` validates one payload and feeds the
   tracker (frames out of order, duplicated, stale or from the future are rejected by reason:
-  ``Tracker.admit``); ``camera_liveliness()`` admits only the site's own cameras, so no
-  name a peer puts in a liveliness key ever reaches an encoder; ``step()`` prunes, takes each confirmed person's set S (latest fresh view per
-  camera), estimates the people whose views changed in one batched call, filters, and returns
+  ``Tracker.admit``); ``camera_liveliness()`` admits only the site's own cameras, so no name
+  a peer puts in a liveliness key ever reaches an encoder; ``step()`` prunes, takes each
+  confirmed person's set S (latest fresh view per camera), estimates the people whose views changed in one batched call, filters, and returns
   the PoseArray. Bad payloads are counted by reason and dropped, never fatal.
 - ``run_host()``: the process around it: a Zenoh subscriber whose callback only queues the raw
   payload (heavy work stays off Zenoh's thread; a payload larger than the decoder accepts is
@@ -262,6 +262,7 @@ def run_host(
     counters = Counter()
     queued_bytes = 0
     alive_events: deque[tuple[str, bool]] = deque()
+    oversize: list[tuple[str, int]] = []  # (key, size) refused on Zenoh's thread, reported by the loop
     latencies: deque[float] = deque(maxlen=20_000)
 
     def on_sample(sample) -> None:
@@ -270,7 +271,10 @@ def run_host(
         size = len(sample.payload)
         if size > wire.MAX_PAYLOAD_BYTES:  # never copied: the decoder would refuse it anyway
             with wake:
-                aggregator._reject("oversize", f"{str(sample.key_expr)[:200]}: {size} bytes, more than the {wire.MAX_PAYLOAD_BYTES} allowed")
+                if len(oversize) < 1000:  # the details of a flood are not all kept
+                    oversize.append((str(sample.key_expr)[:200], size))
+                counters["oversize"] += 1
+                wake.notify()
             return
         with wake:
             while pending and (len(pending) >= cfg.queue_size or queued_bytes + size > cfg.queue_bytes):
@@ -281,7 +285,7 @@ def run_host(
             wake.notify()
 
     def on_alive(sample) -> None:
-        # Applied on the host loop too, so the aggregator is only ever touched by one thread.
+        # Applied on the host loop, like everything else that changes the aggregator.
         with wake:
             if len(alive_events) < 4096:  # bounded even if a peer flaps tokens faster than we loop
                 alive_events.append((str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT))
@@ -306,8 +310,14 @@ def run_host(
                     wake.wait(timeout=min(min_period, 0.05))
                 events = list(alive_events)
                 alive_events.clear()
+                n_oversize, counters["oversize"] = counters["oversize"], 0
+                big = oversize[:]
+                oversize.clear()
             for key, alive in events:
                 aggregator.camera_liveliness(key, alive)
+            for i in range(n_oversize):
+                key, size = big[i] if i < len(big) else ("?", 0)
+                aggregator._reject("oversize", f"{key}: {size} bytes, more than the {wire.MAX_PAYLOAD_BYTES} allowed")
             if max_period and time.monotonic() - last_pub < max_period:
                 time.sleep(max(0.0, max_period - (time.monotonic() - last_pub)))
             newest_arrival = None
