@@ -85,7 +85,8 @@ def _structural(payload: bytes, rng: random.Random) -> bytes:
         elif op == 3 and isinstance(parent[key], list):
             parent[key] = parent[key] * rng.randint(0, 70)
         elif op == 4 and isinstance(parent[key], (int, float)) and not isinstance(parent[key], bool):
-            parent[key] = rng.choice([parent[key] * 1e6, -parent[key], parent[key] + 0.5, float("nan"), float("inf")])
+            v = parent[key]
+            parent[key] = rng.choice([v * 10**6, -v, v + 0.5 if abs(v) < 1e300 else v, float("nan"), float("inf")])
         else:
             parent[key] = "__DEEP__"  # nested arrays, written as text below (json.dumps would recurse)
     depth = rng.choice([1, 10, 200, 2000])
