@@ -58,7 +58,8 @@ class HostConfig:
         max_future_s: observations stamped further ahead of the host's clock are rejected
             (nodes are NTP-synced to milliseconds; a looser limit lets a peer's stamps run ahead).
         queue_size: observations waiting to be processed; beyond it the oldest are dropped.
-        queue_bytes: the same bound in payload bytes.
+        queue_bytes: the same bound in payload bytes (16 MiB: seconds of a 10-camera site's
+            traffic; a backlog longer than that is stale anyway).
         min_publish_hz: publish at least this often even with no new data.
         max_publish_hz: publish at most this often (0: after every batch of arrivals).
         status_every_s: period of the one-line status log.
@@ -69,7 +70,7 @@ class HostConfig:
     freshness_s: float = 0.5
     max_future_s: float = 0.25
     queue_size: int = 4096
-    queue_bytes: int = 64 * 1024 * 1024
+    queue_bytes: int = 16 * 1024 * 1024
     min_publish_hz: float = 5.0
     max_publish_hz: float = 0.0
     status_every_s: float = 10.0
