@@ -5,7 +5,7 @@ PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: demo test bench models clean blazepose
+.PHONY: demo test bench models clean blazepose soak fuzz
 
 # Runtime install (no torch): what the demo and a deployed host need.
 $(VENV)/.run-installed: pyproject.toml
@@ -54,6 +54,15 @@ bench: $(VENV)/.dev-installed
 # Retrain the shipped models and rewrite models/MODEL_CARD.md (~45 min on 2 cores; needs dev.json).
 models: $(VENV)/.dev-installed
 	scripts/train_models.sh
+
+# Not in CI. The demo under load with a hostile phase, RSS sampled each minute (default 30 min,
+# 10 cameras x 10 people; e.g. make soak ARGS="--minutes 5 --cameras 6 --people 5").
+soak: $(VENV)/.dev-installed
+	$(PY) benchmarks/soak.py $(ARGS)
+
+# Not in CI. 100,000 fuzzed Observation and PoseArray payloads through the decoders.
+fuzz: $(VENV)/.dev-installed
+	$(PY) benchmarks/fuzz.py $(ARGS)
 
 clean:
 	rm -rf $(VENV) $(BLAZEPOSE_VENV) .pytest_cache .hypothesis

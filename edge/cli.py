@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import re
 import sys
 from importlib.metadata import entry_points
 
@@ -67,6 +68,14 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
         return 130
+    except Exception as e:
+        # Zenoh's errors (a port already in use, an unreachable TLS file) are raised as ZError
+        # from inside its Rust core: one line naming the cause, not a traceback.
+        if type(e).__name__ != "ZError":
+            raise
+        why = re.sub(r" at \S+\.rs:\d+\.?", "", " ".join(str(e).split()))[:300]  # drop Rust source paths
+        print(f"superbody {args.command}: error: zenoh: {why}", file=sys.stderr)
+        return 2
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -1,7 +1,7 @@
 """``superbody router``: a Zenoh router in a Python process, for a site without zenohd.
 
-The demo and the tests start one on loopback; production sites may run zenohd with the
-configs in deploy/zenoh/ instead. Cameras and the host connect to it as peers or clients.
+The demo and the tests start one on loopback; production sites may run it (or zenohd) with
+a config from deploy/zenoh/ (``--config``: TLS, mutual TLS, user/password and an ACL). Cameras and the host connect to it as peers or clients.
 """
 
 from __future__ import annotations
@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import logging
 import signal
+import sys
 import threading
 
 from superbody.edge import transport
@@ -19,12 +20,12 @@ log = logging.getLogger("superbody.router")
 
 
 def run_router(listen: list[str], stop: threading.Event, config_file: str | None = None) -> None:
-    """Run a router listening on ``listen`` until ``stop`` is set."""
+    """Run a router listening on ``listen`` (empty: the config file's endpoints) until ``stop`` is set."""
     import zenoh
 
-    conf = transport.session_config("router", connect=[], listen=listen, config_file=config_file)
+    conf = transport.session_config("router", connect=[], listen=listen or None, config_file=config_file)
     with zenoh.open(conf):
-        log.info("zenoh router listening on %s", ", ".join(listen))
+        log.info("zenoh router listening on %s", ", ".join(listen) if listen else conf.get_json("listen/endpoints"))
         stop.wait()
 
 
@@ -32,7 +33,11 @@ def _run(args: argparse.Namespace) -> int:
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
-    run_router(args.listen or [transport.DEFAULT_ENDPOINT], stop, args.config)
+    try:
+        run_router(args.listen or ([] if args.config else [transport.DEFAULT_ENDPOINT]), stop, args.config)
+    except transport.ConfigError as e:
+        print(f"superbody router: error: {e}", file=sys.stderr)
+        return 2
     return 0
 
 

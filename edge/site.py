@@ -252,11 +252,23 @@ def load_site(path: str | Path) -> Site:
         text = path.read_text(encoding="utf-8")
     except OSError as e:
         raise SiteError(f"{path}: cannot read site file ({e.strerror})") from None
+    except UnicodeDecodeError as e:
+        line = _text_line(path, e.start)
+        raise SiteError(f"{path}: not UTF-8 text (byte 0x{e.object[e.start]:02x} at offset {e.start}, line {line}); "
+                        "site files are UTF-8 TOML") from None
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise SiteError(f"{path}: not valid TOML ({e})") from None
     return parse_site(doc, path=str(path))
+
+
+def _text_line(path: Path, offset: int) -> int:
+    """The 1-based line of byte ``offset`` in the file (for error messages)."""
+    try:
+        return path.read_bytes()[:offset].count(b"\n") + 1
+    except OSError:
+        return 0
 
 
 def _fmt(v: float) -> str:

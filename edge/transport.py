@@ -3,7 +3,14 @@
 Options follow the Zenoh examples (``--mode``, ``--connect``, ``--listen``, ``--config``).
 The default is a peer on loopback with multicast scouting off that connects to
 ``tcp/127.0.0.1:7447`` and keeps retrying until something listens there, so processes may
-start in any order.
+start in any order; it listens on loopback only (``tcp/127.0.0.1:0``), never on every
+interface, and sets Zenoh's ``transport/link/rx/max_message_size`` to ``MAX_MESSAGE_BYTES``
+(the default is 1 GiB). Measured with eclipse-zenoh 1.10.2: a 5 MB put between two peers on
+loopback is still delivered with that limit set, so the host's own size check before copying
+(host.aggregator) is what bounds the memory a large payload costs. Endpoints given on the command line
+are checked (``check_endpoint``) so a typo is a one-line error, not a retry loop for ever.
+Secured deployments pass a config file (``--config``, see deploy/zenoh/): it is used as
+written, except for options given on the command line.
 
 Keys (everything under ``superbody/<site>/``):
 
@@ -18,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 from typing import TYPE_CHECKING, Literal
 
 if TYPE_CHECKING:
@@ -35,9 +43,46 @@ __all__ = [
     "host_alive_key",
     "host_status_key",
     "camera_from_key",
+    "check_endpoint",
+    "ConfigError",
+    "MAX_MESSAGE_BYTES",
+    "LOOPBACK_LISTEN",
 ]
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+LOOPBACK_LISTEN = "tcp/127.0.0.1:0"
+# Our largest message is a PoseArray (host.pose.MAX_PAYLOAD_BYTES, 512 KiB): 1 MiB leaves room.
+MAX_MESSAGE_BYTES = 1024 * 1024
+_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws", "unixsock-stream")
+_ENDPOINT_RE = re.compile(r"^(?P<proto>[a-z-]+)/(?P<addr>[^?#]+?)(?P<rest>[?#].*)?$")
+
+
+class ConfigError(ValueError):
+    """A Zenoh option (endpoint, mode, config file) that cannot work; the message names it."""
+
+
+def check_endpoint(text: str, option: str = "--connect", listen: bool = False) -> str:
+    """A Zenoh endpoint ``<proto>/<host>:<port>`` with a known protocol and a port in range.
+
+    Args:
+        text: the endpoint.
+        option: the option it came from, for the error message.
+        listen: port 0 (any free port) is allowed when listening.
+
+    Raises:
+        ConfigError: naming the option, the value and what is allowed.
+    """
+    lo = 0 if listen else 1
+    m = _ENDPOINT_RE.match(text) if isinstance(text, str) else None
+    if m is None or m["proto"] not in _PROTOCOLS:
+        raise ConfigError(f"{option} {text!r}: an endpoint is <protocol>/<host>:<port>, protocol one of "
+                          f"{', '.join(_PROTOCOLS)}, e.g. {DEFAULT_ENDPOINT}")
+    if m["proto"] == "unixsock-stream":
+        return text
+    host, sep, port = m["addr"].rpartition(":")
+    if not sep or not host or not port.isdigit() or not lo <= int(port) <= 65535:
+        raise ConfigError(f"{option} {text!r}: the port must be an integer in [{lo}, 65535] after the host, e.g. {DEFAULT_ENDPOINT}")
+    return text
 Mode = Literal["peer", "client", "router"]
 
 
@@ -85,7 +130,7 @@ def camera_from_key(key: str) -> str | None:
 
 
 def session_config(
-    mode: Mode = "peer",
+    mode: Mode | None = "peer",
     connect: list[str] | None = None,
     listen: list[str] | None = None,
     config_file: str | None = None,
@@ -93,27 +138,48 @@ def session_config(
     """Build a Zenoh config.
 
     Args:
-        mode: peer, client or router.
+        mode: peer, client or router; None keeps the config file's (peer without one).
         connect: endpoints to connect to; None means ``[DEFAULT_ENDPOINT]`` unless listening.
-        listen: endpoints to listen on.
+        listen: endpoints to listen on; None means loopback only (``LOOPBACK_LISTEN``) for a
+            peer without a config file.
         config_file: a Zenoh JSON5 config file; the other arguments override it where given.
 
     Connections are retried for ever (``connect/timeout_ms: -1``, ``exit_on_failure: false``),
     so a node started before its peer or router publishes as soon as it is reachable.
+
+    Raises:
+        ConfigError: an unknown mode, a malformed endpoint, a missing or invalid config file.
     """
     import zenoh
 
-    if mode not in ("peer", "client", "router"):
-        raise ValueError(f"mode must be one of peer, client, router; got {mode!r}")
-    conf = zenoh.Config.from_file(config_file) if config_file else zenoh.Config()
-    conf.insert_json5("mode", json.dumps(mode))
+    if mode is None and not config_file:
+        mode = "peer"
+    if mode is not None and mode not in ("peer", "client", "router"):
+        raise ConfigError(f"mode must be one of peer, client, router; got {mode!r}")
+    for e in connect or ():
+        check_endpoint(e, "--connect")
+    for e in listen or ():
+        check_endpoint(e, "--listen", listen=True)
+    if config_file:
+        try:
+            conf = zenoh.Config.from_file(config_file)
+        except Exception as e:  # zenoh raises ZError (not an OSError) for both missing and invalid files
+            why = re.sub(r" at \S+\.rs:\d+\.?$", "", " ".join(str(e).split()))[:300] or type(e).__name__
+            raise ConfigError(f"--config {config_file}: not a readable Zenoh JSON5 config: {why}") from None
+    else:
+        conf = zenoh.Config()
+    if mode is not None:
+        conf.insert_json5("mode", json.dumps(mode))
     if connect is None:
         connect = [] if (listen or config_file or mode == "router") else [DEFAULT_ENDPOINT]
     if connect or not config_file:
         conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    if listen is None and not config_file and mode == "peer":
+        listen = [LOOPBACK_LISTEN]
     if listen is not None:
         conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
     if not config_file:
+        conf.insert_json5("transport/link/rx/max_message_size", str(MAX_MESSAGE_BYTES))
         conf.insert_json5("scouting/multicast/enabled", "false")
         conf.insert_json5("connect/timeout_ms", "-1")
         conf.insert_json5("connect/exit_on_failure", "false")
@@ -124,7 +190,7 @@ def session_config(
 def add_session_args(parser: argparse.ArgumentParser) -> None:
     """Add the Zenoh examples' session options to a parser."""
     g = parser.add_argument_group("zenoh session")
-    g.add_argument("--mode", choices=("peer", "client", "router"), default="peer", help="Zenoh mode (default: peer)")
+    g.add_argument("--mode", choices=("peer", "client", "router"), default=None, help="Zenoh mode (default: the --config file's, else peer)")
     g.add_argument("-e", "--connect", action="append", metavar="ENDPOINT", help=f"endpoint to connect to (repeatable; default {DEFAULT_ENDPOINT})")
     g.add_argument("-l", "--listen", action="append", metavar="ENDPOINT", help="endpoint to listen on (repeatable)")
     g.add_argument("-c", "--config", metavar="FILE", help="Zenoh JSON5 configuration file")

@@ -3,11 +3,15 @@
 Two layers:
 
 - ``Aggregator``: pure and clock-injected. ``ingest()`` validates one payload and feeds the
-  tracker; ``step()`` prunes, takes each confirmed person's set S (latest fresh view per
-  camera), estimates the people whose views changed in one batched call, filters, and returns
+  tracker (frames out of order, duplicated, stale or from the future are rejected by reason:
+  ``Tracker.admit``); ``camera_liveliness()`` admits only the site's own cameras, so no name
+  a peer puts in a liveliness key ever reaches an encoder; ``step()`` prunes, takes each
+  confirmed person's set S (latest fresh view per camera), estimates the people whose views changed in one batched call, filters, and returns
   the PoseArray. Bad payloads are counted by reason and dropped, never fatal.
 - ``run_host()``: the process around it: a Zenoh subscriber whose callback only queues the raw
-  payload (heavy work stays off Zenoh's thread), a loop that drains the queue and publishes
+  payload (heavy work stays off Zenoh's thread; a payload larger than the decoder accepts is
+  counted and dropped before it is copied, and the queue is bounded in bytes as well as in
+  messages), a loop that drains the queue and publishes
   after each batch, camera liveliness, a periodic one-line status, also published as JSON on
   ``superbody/<site>/host/status``: ``{"cameras_alive": [ids], "cameras_total": n,
   "people": n, "obs_per_s": f, "latency_ms": {"p50": f, "p99": f}, "rejected": {reason: n},
@@ -51,8 +55,11 @@ class HostConfig:
 
     Attributes:
         freshness_s: a camera's latest view of a person counts in set S for this long.
-        max_future_s: observations stamped further ahead of the host's clock are rejected.
+        max_future_s: observations stamped further ahead of the host's clock are rejected
+            (nodes are NTP-synced to milliseconds; a looser limit lets a peer's stamps run ahead).
         queue_size: observations waiting to be processed; beyond it the oldest are dropped.
+        queue_bytes: the same bound in payload bytes (16 MiB: seconds of a 10-camera site's
+            traffic; a backlog longer than that is stale anyway).
         min_publish_hz: publish at least this often even with no new data.
         max_publish_hz: publish at most this often (0: after every batch of arrivals).
         status_every_s: period of the one-line status log.
@@ -61,8 +68,9 @@ class HostConfig:
     """
 
     freshness_s: float = 0.5
-    max_future_s: float = 1.0
+    max_future_s: float = 0.25
     queue_size: int = 4096
+    queue_bytes: int = 16 * 1024 * 1024
     min_publish_hz: float = 5.0
     max_publish_hz: float = 0.0
     status_every_s: float = 10.0
@@ -77,6 +85,8 @@ class HostConfig:
                 raise ValueError(f"HostConfig.{name} must be in [{lo}, {hi}], got {v!r}")
         if not 1 <= self.queue_size <= 1_000_000:
             raise ValueError(f"HostConfig.queue_size must be in [1, 1000000], got {self.queue_size!r}")
+        if not wire.MAX_PAYLOAD_BYTES <= self.queue_bytes <= 2**34:
+            raise ValueError(f"HostConfig.queue_bytes must be in [{wire.MAX_PAYLOAD_BYTES}, {2**34}], got {self.queue_bytes!r}")
 
 
 def confidence(views: dict[str, PersonView]) -> float:
@@ -135,11 +145,34 @@ class Aggregator:
             return self._reject("image_size", f"camera {obs.camera}: image {obs.width}x{obs.height}, the site says {size[0]}x{size[1]}")
         if obs.stamp_ns > now_ns + self.config.max_future_s * _NS:
             return self._reject("future_stamp", f"camera {obs.camera}: stamp {(obs.stamp_ns - now_ns) / _NS:.1f} s ahead of the host clock")
-        late = self.tracker.stats.get("late_dropped", 0)
-        self.tracker.update(obs, now_ns)
-        if self.tracker.stats.get("late_dropped", 0) > late:
-            return self._reject("late", f"camera {obs.camera}: frame {obs.seq} older than one already processed")
+        why = self.tracker.admit(obs, now_ns)
+        self.tracker.update(obs, now_ns)  # a refused frame is counted (and remembered) there too
+        if why is not None:
+            return self._reject(why, f"camera {obs.camera}: frame {obs.seq} stamped {obs.stamp_ns} ({_DROP_DETAIL.get(why, why)})")
         self.accepted += 1
+        return True
+
+    def camera_liveliness(self, key: str, alive: bool) -> bool:
+        """A camera's liveliness token appeared (``alive``) or went; only the site's cameras count.
+
+        A token under ``superbody/<site>/cameras/`` may be declared by any peer: its camera name
+        is untrusted. Unknown names are counted as ``unknown_camera_alive`` and ignored, so
+        ``cameras_alive`` only ever holds the site's camera ids.
+
+        Returns:
+            True if the key named a camera of the site.
+        """
+        cam = transport.camera_from_key(key)
+        if cam not in self._cam_size:
+            return self._reject("unknown_camera_alive", f"liveliness token {str(key)[:200]!r} names no camera of site {self.site.name!r}")
+        if alive:
+            if cam not in self.cameras_alive:
+                log.info("camera %s is alive", cam)
+                self.tracker.reset_camera(cam)  # a (re)started node counts its frames from 0 again
+            self.cameras_alive.add(cam)
+        else:
+            self.cameras_alive.discard(cam)
+            log.warning("camera %s is gone (liveliness token dropped); it stops contributing", cam)
         return True
 
     def _reject(self, reason: str, detail: str) -> bool:
@@ -185,6 +218,14 @@ class Aggregator:
         )
 
 
+_DROP_DETAIL = {
+    "late": "older than one already processed",
+    "duplicate": "the same stamp or sequence number as the last one",
+    "seq_backwards": "sequence number went back without a restart",
+    "stale": "too old to keep anyone alive",
+}
+
+
 def _percentiles(values: deque) -> tuple[float, float]:
     if not values:
         return math.nan, math.nan
@@ -223,28 +264,36 @@ def run_host(
     pending: deque[tuple[bytes, str, int]] = deque()
     wake = threading.Condition()
     counters = Counter()
+    queued_bytes = 0
+    alive_events: deque[tuple[str, bool]] = deque()
+    oversize: list[tuple[str, int]] = []  # (key, size) refused on Zenoh's thread, reported by the loop
     latencies: deque[float] = deque(maxlen=20_000)
 
     def on_sample(sample) -> None:
         # Only queue here: decoding and estimation run on the host loop, off Zenoh's thread.
-        if len(pending) >= cfg.queue_size:
-            pending.popleft()
-            counters["queue_dropped"] += 1
-        pending.append((sample.payload.to_bytes(), str(sample.key_expr), time.time_ns()))
+        nonlocal queued_bytes
+        size = len(sample.payload)
+        if size > wire.MAX_PAYLOAD_BYTES:  # never copied: the decoder would refuse it anyway
+            with wake:
+                if len(oversize) < 1000:  # the details of a flood are not all kept
+                    oversize.append((str(sample.key_expr)[:200], size))
+                counters["oversize"] += 1
+                wake.notify()
+            return
         with wake:
+            while pending and (len(pending) >= cfg.queue_size or queued_bytes + size > cfg.queue_bytes):
+                queued_bytes -= len(pending.popleft()[0])
+                counters["queue_dropped"] += 1
+            pending.append((sample.payload.to_bytes(), str(sample.key_expr), time.time_ns()))
+            queued_bytes += size
             wake.notify()
 
     def on_alive(sample) -> None:
-        cam = transport.camera_from_key(str(sample.key_expr))
-        if cam is None:
-            return
-        if sample.kind == zenoh.SampleKind.PUT:
-            if cam not in aggregator.cameras_alive:
-                log.info("camera %s is alive", cam)
-            aggregator.cameras_alive.add(cam)
-        else:
-            aggregator.cameras_alive.discard(cam)
-            log.warning("camera %s is gone (liveliness token dropped); it stops contributing", cam)
+        # Applied on the host loop, like everything else that changes the aggregator.
+        with wake:
+            if len(alive_events) < 4096:  # bounded even if a peer flaps tokens faster than we loop
+                alive_events.append((str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT))
+            wake.notify()
 
     end = None if duration_s is None else time.monotonic() + duration_s
     min_period = 1.0 / cfg.min_publish_hz
@@ -261,13 +310,27 @@ def run_host(
         obs_since_status = 0
         while not stop.is_set() and (end is None or time.monotonic() < end):
             with wake:
-                if not pending:
+                if not pending and not alive_events:
                     wake.wait(timeout=min(min_period, 0.05))
+                events = list(alive_events)
+                alive_events.clear()
+                n_oversize, counters["oversize"] = counters["oversize"], 0
+                big = oversize[:]
+                oversize.clear()
+            for key, alive in events:
+                aggregator.camera_liveliness(key, alive)
+            for i in range(n_oversize):
+                key, size = big[i] if i < len(big) else ("?", 0)
+                aggregator._reject("oversize", f"{key}: {size} bytes, more than the {wire.MAX_PAYLOAD_BYTES} allowed")
             if max_period and time.monotonic() - last_pub < max_period:
                 time.sleep(max(0.0, max_period - (time.monotonic() - last_pub)))
             newest_arrival = None
-            while pending:
-                payload, key, arrival = pending.popleft()
+            while True:
+                with wake:
+                    if not pending:
+                        break
+                    payload, key, arrival = pending.popleft()
+                    queued_bytes -= len(payload)
                 if aggregator.ingest(payload, key, clock.now_ns()):
                     newest_arrival = arrival
                 obs_since_status += 1

@@ -52,10 +52,16 @@ def build_estimator(site: Site, kind: str = "auto", model: str | Path | None = N
                          "pass --model M.onnx or --estimator analytic")
     if not path.is_file():
         raise ValueError(f"--model {path}: no such file")
-    from superbody.host.estimator import OnnxEstimator
+    from superbody.host.estimator import ModelMismatchError, OnnxEstimator
     from superbody.host.hybrid import META_HYBRID, HybridEstimator
 
-    net = OnnxEstimator(path, site)
+    try:
+        net = OnnxEstimator(path, site)
+    except ModelMismatchError:
+        raise
+    except Exception as e:  # onnxruntime's own errors: an empty, truncated or non-ONNX file
+        why = " ".join(str(e).split())[:200]
+        raise ValueError(f"--model {path}: not a loadable ONNX model ({path.stat().st_size} bytes): {why}") from None
     if kind == "hybrid" or (kind == "auto" and net.has_std and META_HYBRID in net.metadata):
         return HybridEstimator(net, site), f"hybrid:{path.name}"
     return net, f"onnx:{path.name}"

@@ -325,7 +325,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=7, help="simulator seed (default 7)")
     p.add_argument("--duration", type=positive, default=None, help="stop after this many simulated seconds (default: Ctrl-C)")
     p.add_argument("--clock-scale", type=positive, default=1.0, help="simulated seconds per wall second (default 1)")
-    p.add_argument("--port", type=int, default=7447, help="loopback port of the demo's Zenoh router (default 7447)")
+    p.add_argument("--port", type=int_in(1, 65535, "--port"), default=7447, help="loopback port of the demo's Zenoh router (default 7447)")
     p.add_argument("--estimator", choices=("auto", "hybrid", "onnx", "analytic"), default="auto",
                    help="pose estimator (default auto: the shipped int8 model, fused with geometry when it carries a hybrid calibration)")
     p.add_argument("--model", help="ONNX model (default: models/<site>.int8.onnx)")

@@ -24,8 +24,12 @@ from __future__ import annotations
 import binascii
 import logging
 import math
+import os
+import socket
 import struct
-from collections import Counter
+import threading
+import time
+from collections import Counter, deque
 from typing import Any, Final, NamedTuple
 
 import numpy as np
@@ -290,84 +294,190 @@ class FrameReader:
 class SerialLink:
     """Writes each tick's frame to a serial port without ever blocking the host.
 
-    A frame is written only when the port's output queue holds at most ``max_backlog`` bytes:
-    otherwise it is dropped, because a frame queued behind older ones would reach the robot
-    late, and because pyserial's non-blocking write on a full kernel buffer spins until it has
-    room. A write that raises (unplugged adapter, closed port) is counted as an error and
-    logged once until a write succeeds again; the link stays up. Not thread-safe: call ``send``
-    from one thread.
+    Frames wait in a small buffer (``buffer_frames``); when it is full the oldest waiting frame
+    is dropped (counted), because the robot wants the newest poses, not a backlog. Each
+    ``send`` writes what the port takes *now*: the bytes go out through a non-blocking
+    ``os.write`` on the port's descriptor (or ``MSG_DONTWAIT`` on a ``socket://`` port), never
+    through pyserial's ``write``, which spins on a full kernel buffer (a paused reader once
+    stopped the host's publishing for 9.4 s). A frame partly written is finished before the
+    next starts, so no frame is ever cut. A frame is started only while the port's output
+    queue holds at most ``max_backlog`` bytes.
+
+    When a write fails (the adapter was unplugged, the peer closed), a port this link opened is
+    closed and reopened in a background thread every ``reconnect_s`` until it works; frames
+    keep going to the buffer meanwhile. Not thread-safe: call ``send`` from one thread.
 
     Args:
         url: a pyserial URL or device (``/dev/ttyUSB0``, ``COM3``, ``loop://``,
             ``socket://host:port``), opened with ``timeout=0, write_timeout=0``; or an
-            already-open ``serial.SerialBase``, used as it is and not closed by ``close()``.
+            already-open ``serial.SerialBase``, used as it is, not closed by ``close()`` and
+            not reopened.
         baudrate: bits per second (8N1: a 10-person frame of 200 bytes takes 17 ms at 115200).
-        max_backlog: bytes allowed to wait in the output queue when a frame is written.
+        max_backlog: bytes allowed in the port's output queue when a frame is started.
+        buffer_frames: frames allowed to wait besides the one being written.
+        reconnect_s: seconds between attempts to reopen a failed port.
 
     Attributes:
-        port: the ``serial.SerialBase`` in use.
-        stats: ``sent``, ``dropped`` (port busy, or a partial write), ``errors`` (the write
-            raised): each ``send`` counts exactly one; and ``clamped``, values clamped in all.
+        port: the ``serial.SerialBase`` in use (None while reconnecting).
+        stats: ``sent`` (frames written whole), ``dropped`` (oldest frames pushed out of the
+            buffer), ``errors`` (writes that raised), ``reconnects`` (ports reopened),
+            ``clamped`` (values clamped in all).
         clamps: clamped values per frame field.
 
     Raises:
-        SerialLinkError: the port cannot be opened; the message names the URL.
+        SerialLinkError: the port cannot be opened at first; the message names the URL.
     """
 
-    def __init__(self, url: str | serial.SerialBase, baudrate: int = 115200, *, max_backlog: int = 0) -> None:
+    def __init__(self, url: str | serial.SerialBase, baudrate: int = 115200, *, max_backlog: int = 0,
+                 buffer_frames: int = 2, reconnect_s: float = 1.0) -> None:
+        if not 1 <= buffer_frames <= 1000:
+            raise ValueError(f"SerialLink buffer_frames must be in [1, 1000], got {buffer_frames!r}")
+        if not (isinstance(reconnect_s, (int, float)) and 0.01 <= reconnect_s <= 3600):
+            raise ValueError(f"SerialLink reconnect_s must be in [0.01, 3600] seconds, got {reconnect_s!r}")
+        self.baudrate = baudrate
         if not isinstance(url, str):  # an open port (or a fake with write and out_waiting)
-            self.port: serial.SerialBase = url
+            self.port: serial.SerialBase | None = url
             self.url = str(getattr(url, "port", url))
             self._owned = False
         else:
-            try:
-                self.port = serial.serial_for_url(url, baudrate=baudrate, timeout=0, write_timeout=0)
-            except (serial.SerialException, OSError, ValueError) as e:
-                raise SerialLinkError(f"cannot open serial port {url!r} at {baudrate} baud: {e}") from e
             self.url = url
             self._owned = True
+            self.port = self._open()
         self.max_backlog = max_backlog
-        self.stats: dict[str, int] = {"sent": 0, "dropped": 0, "errors": 0, "clamped": 0}
+        self.buffer_frames = buffer_frames
+        self.reconnect_s = float(reconnect_s)
+        self.stats: dict[str, int] = {"sent": 0, "dropped": 0, "errors": 0, "reconnects": 0, "clamped": 0}
         self.clamps: Counter[str] = Counter()
+        self._frames: deque[bytes] = deque()  # waiting frames, oldest first
+        self._head_done = 0  # bytes of _frames[0] already written
         self._failing = False
+        self._reopening: threading.Thread | None = None
+        self._next_try = 0.0
+        self._closed = False
 
-    def _backlog(self) -> int:
+    def _open(self) -> serial.SerialBase:
         try:
-            return int(self.port.out_waiting)
-        except (NotImplementedError, AttributeError):  # some URL handlers cannot tell
+            return serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=0, write_timeout=0)
+        except (serial.SerialException, OSError, ValueError) as e:
+            raise SerialLinkError(f"cannot open serial port {self.url!r} at {self.baudrate} baud: {e}") from e
+
+    @property
+    def pending(self) -> int:
+        """Frames waiting to be written (the one partly written included)."""
+        return len(self._frames)
+
+    def _backlog(self, port) -> int:
+        try:
+            return int(port.out_waiting)
+        except (NotImplementedError, AttributeError, OSError, serial.SerialException):  # some handlers cannot tell
             return 0
 
+    def _write_some(self, port, data: bytes) -> int:
+        """Write what the port takes now, without blocking or spinning; the bytes written."""
+        sock = getattr(port, "_socket", None)  # pyserial's socket:// handler
+        if sock is not None:
+            try:
+                return sock.send(data, socket.MSG_DONTWAIT)
+            except BlockingIOError:
+                return 0
+        try:
+            fd = port.fileno()
+        except (AttributeError, NotImplementedError, OSError, serial.SerialException):
+            fd = None
+        if fd is not None:
+            try:
+                return os.write(fd, data)  # pyserial opens ports with O_NONBLOCK
+            except BlockingIOError:
+                return 0
+        try:  # loop:// and other handlers: their own write, told not to wait
+            n = port.write(data)
+        except serial.SerialTimeoutException:
+            return 0
+        return len(data) if n is None else int(n)
+
     def send(self, poses: PoseArray) -> bool:
-        """Write ``poses`` as one frame if the port can take it now; True if it was written whole."""
+        """Queue ``poses`` as one frame and write what the port takes now.
+
+        Returns:
+            True if this frame was written whole during this call.
+        """
         before = sum(self.clamps.values())
         frame = pack_frame(poses, clamps=self.clamps)
         self.stats["clamped"] += sum(self.clamps.values()) - before
-        try:
-            if self._backlog() > self.max_backlog:
-                self.stats["dropped"] += 1
-                return False
-            n = self.port.write(frame)
-        except serial.SerialTimeoutException:  # the write would have blocked
+        self._frames.append(frame)
+        # Drop the oldest waiting frame, never the one partly written (it would arrive cut).
+        while len(self._frames) > self.buffer_frames + (1 if self._head_done else 0):
+            del self._frames[1 if self._head_done else 0]
             self.stats["dropped"] += 1
+        sent_before = self.stats["sent"]
+        port = self.port
+        if port is None:
+            self._reopen_later()
             return False
+        try:
+            while self._frames:
+                head = self._frames[0]
+                if self._head_done == 0 and self._backlog(port) > self.max_backlog:
+                    break
+                n = self._write_some(port, head[self._head_done:])
+                if n <= 0:
+                    break
+                self._head_done += n
+                if self._head_done < len(head):
+                    break  # the port took part of it: the rest goes first next time
+                self._frames.popleft()
+                self._head_done = 0
+                self.stats["sent"] += 1
         except (serial.SerialException, OSError) as e:
-            self.stats["errors"] += 1
-            if not self._failing:
-                log.warning("serial link %s: write failed, dropping frames until it works again: %s", self.url, e)
-                self._failing = True
+            self._failed(e)
             return False
         if self._failing:
             log.info("serial link %s: writing again after %d errors", self.url, self.stats["errors"])
             self._failing = False
-        if n is not None and n < len(frame):  # the receiver will skip the fragment by its CRC
-            self.stats["dropped"] += 1
-            return False
-        self.stats["sent"] += 1
-        return True
+        return self.stats["sent"] > sent_before and not any(f is frame for f in self._frames)
+
+    def _failed(self, e: Exception) -> None:
+        self.stats["errors"] += 1
+        if not self._failing:
+            log.warning("serial link %s: write failed (%s); frames are buffered (newest %d kept)%s", self.url, e,
+                        self.buffer_frames, ", reopening it" if self._owned else "")
+            self._failing = True
+        self._head_done = 0  # whatever was cut is skipped by the receiver (CRC); resend it whole
+        if self._owned:
+            port, self.port = self.port, None
+            try:
+                port.close()
+            except Exception:  # closing a dead port may fail too; it is gone either way
+                pass
+            self._next_try = time.monotonic() + self.reconnect_s
+            self._reopen_later()
+
+    def _reopen_later(self) -> None:
+        """Start one background attempt to reopen the port, if it is time (never blocks)."""
+        if not self._owned or self._closed or (self._reopening is not None and self._reopening.is_alive()):
+            return
+        if time.monotonic() < self._next_try:
+            return
+        self._next_try = time.monotonic() + self.reconnect_s
+        self._reopening = threading.Thread(target=self._reopen, name="serial-reopen", daemon=True)
+        self._reopening.start()
+
+    def _reopen(self) -> None:
+        try:
+            port = self._open()
+        except SerialLinkError:
+            return
+        if self._closed:
+            port.close()
+            return
+        self.stats["reconnects"] += 1
+        log.info("serial link %s: reopened", self.url)
+        self.port = port
 
     def close(self) -> None:
         """Close the port if this link opened it."""
-        if self._owned:
+        self._closed = True
+        if self._owned and self.port is not None:
             self.port.close()
 
     def __enter__(self) -> SerialLink:

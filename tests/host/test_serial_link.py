@@ -286,19 +286,22 @@ def test_link_end_to_end_over_loop_port(loop_port: serial.SerialBase) -> None:
     assert len(got) == 3
     for poses, frame in zip(sent, got):
         assert_frame_close(poses, frame)
-    assert link.stats == {"sent": 3, "dropped": 0, "errors": 0, "clamped": 0}
+    assert link.stats == {"sent": 3, "dropped": 0, "errors": 0, "reconnects": 0, "clamped": 0}
     link.close()
     assert loop_port.is_open  # a port passed in belongs to the caller
 
 
-def test_link_drops_frames_while_the_port_is_busy(loop_port: serial.SerialBase) -> None:
-    """Nothing read yet: the first frame still waits in the port, so the next one is dropped."""
-    link = SerialLink(loop_port)
+def test_link_keeps_the_newest_frames_while_the_port_is_busy(loop_port: serial.SerialBase) -> None:
+    """Nothing read yet: the first frame still waits in the port; later ones wait in the buffer,
+    the oldest pushed out, and the newest goes as soon as the port has room."""
+    link = SerialLink(loop_port, buffer_frames=1)
     assert link.send(make_poses(1, seq=1))
-    assert not link.send(make_poses(1, seq=2))
+    assert not link.send(make_poses(1, seq=2)) and link.pending == 1
+    assert not link.send(make_poses(1, seq=3)) and link.pending == 1  # 2 dropped: 3 is newer
     assert [f.seq for f in FrameReader().feed(loop_port.read(4096))] == [1]
-    assert link.send(make_poses(1, seq=3))
-    assert link.stats == {"sent": 2, "dropped": 1, "errors": 0, "clamped": 0}
+    assert link.send(make_poses(1, seq=4))  # 3 was pushed out by 4 (a buffer of one)
+    assert [f.seq for f in FrameReader().feed(loop_port.read(4096))] == [4]
+    assert link.stats == {"sent": 2, "dropped": 2, "errors": 0, "reconnects": 0, "clamped": 0}
 
 
 def test_link_with_backlog_allowance_queues_frames(loop_port: serial.SerialBase) -> None:
@@ -312,8 +315,8 @@ def test_link_opened_by_url_is_non_blocking() -> None:
     """pyserial's loop:// with write_timeout=0 refuses every write as one that would block."""
     with SerialLink("loop://", baudrate=57600) as link:
         assert (link.port.timeout, link.port.write_timeout, link.port.baudrate) == (0, 0, 57600)
-        assert not link.send(make_poses(2))
-        assert link.stats == {"sent": 0, "dropped": 1, "errors": 0, "clamped": 0}
+        assert not link.send(make_poses(2)) and link.pending == 1
+        assert link.stats == {"sent": 0, "dropped": 0, "errors": 0, "reconnects": 0, "clamped": 0}
     assert not link.port.is_open  # a port it opened, it closes
 
 
@@ -322,7 +325,8 @@ def test_link_counts_errors_and_never_raises(loop_port: serial.SerialBase) -> No
     loop_port.close()  # as if the adapter was unplugged
     for _ in range(3):
         assert not link.send(make_poses(1))
-    assert link.stats == {"sent": 0, "dropped": 0, "errors": 3, "clamped": 0}
+    assert link.stats == {"sent": 0, "dropped": 1, "errors": 3, "reconnects": 0, "clamped": 0}
+    assert link.pending == 2  # the newest, kept for when it works again
 
 
 class ShortWrites:
@@ -336,14 +340,21 @@ class ShortWrites:
 
     def write(self, data: bytes) -> int:
         self.written += data[:7]
-        return 7
+        return min(7, len(data))
 
 
-def test_link_counts_a_partial_write_as_dropped() -> None:
+def test_a_partly_written_frame_is_finished_never_cut() -> None:
     port = ShortWrites()
-    link = SerialLink(port)
-    assert not link.send(make_poses(1))
-    assert link.stats["dropped"] == 1 and FrameReader().feed(port.written) == []
+    link = SerialLink(port, buffer_frames=1)
+    first = make_poses(1, seq=1)
+    assert not link.send(first)  # 7 bytes out, the rest waits
+    assert FrameReader().feed(port.written) == []
+    sends = 1
+    while link.stats["sent"] == 0 and sends < 100:  # bounded
+        link.send(make_poses(1, seq=100 + sends))  # newer frames push each other out, never the cut one
+        sends += 1
+    (frame,) = FrameReader().feed(port.written)
+    assert frame.seq == 1 and link.stats["dropped"] == sends - 2
 
 
 def test_link_counts_clamps() -> None:
@@ -373,3 +384,95 @@ def test_docs_example_frame_is_the_json_example_packed() -> None:
     frame = bytes.fromhex(re.sub(r"(?m)#.*$", "", hexdump.group(1)))
     assert frame == pack_frame(decode(doc.group(1).encode()))
     assert unpack_frame(frame).seq == decode(doc.group(1).encode()).seq
+
+
+def test_a_paused_reader_on_a_pty_never_blocks_send() -> None:
+    """Issue 11 #5: with nobody reading a pty, pyserial's write spun once ~20 KB were buffered
+    and the host stopped publishing. Here 2000 ten-person frames (~400 KB) go to a pty whose
+    reader never reads; every send must return at once."""
+    import os
+    import threading
+    import time
+
+    master, slave = os.openpty()
+    try:
+        link = SerialLink(os.ttyname(slave), buffer_frames=4)
+        poses = make_poses(10)
+        worst = []
+
+        def hammer() -> None:
+            for _ in range(2000):
+                t = time.perf_counter()
+                link.send(poses)
+                worst.append(time.perf_counter() - t)
+
+        th = threading.Thread(target=hammer, daemon=True)
+        th.start()
+        th.join(timeout=20)
+        assert not th.is_alive(), f"send blocked after {len(worst)} frames"
+        assert max(worst) < 0.05 and link.stats["sent"] > 0 and link.stats["dropped"] > 1000 and link.pending <= 5
+        # The reader comes back: it gets whole frames, the newest ones among them.
+        os.set_blocking(master, False)
+        data = b""
+        for _ in range(200):  # bounded drain
+            try:
+                data += os.read(master, 65536)
+            except BlockingIOError:
+                if not link.pending:
+                    break
+                link.send(poses)
+        assert len(FrameReader().feed(data)) >= link.stats["sent"] - 1
+        link.close()
+    finally:
+        os.close(master)
+        os.close(slave)
+
+
+def test_the_link_reconnects_after_the_device_goes_away() -> None:
+    """Issue 11 #5: a ``socket://`` peer closed and listening again: 0 reconnects in 10 s."""
+    import socket
+    import time
+
+    def listen(port: int = 0) -> socket.socket:
+        srv = socket.socket()
+        srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        srv.bind(("127.0.0.1", port))
+        srv.listen(1)
+        srv.settimeout(5)
+        return srv
+
+    srv = listen()
+    port = srv.getsockname()[1]
+    link = SerialLink(f"socket://127.0.0.1:{port}", reconnect_s=0.05)
+    peer, _ = srv.accept()
+    assert link.send(make_poses(1, seq=1))
+    peer.settimeout(5)
+    assert [f.seq for f in FrameReader().feed(peer.recv(4096))] == [1]
+    peer.close()  # the device goes away ...
+    srv.close()
+    deadline = time.monotonic() + 10
+    while link.stats["errors"] == 0 and time.monotonic() < deadline:  # TCP notices on the 2nd write
+        link.send(make_poses(1, seq=2))
+        time.sleep(0.01)
+    assert link.stats["errors"] >= 1
+    srv = listen(port)  # ... and comes back
+    try:
+        seq = 100
+        while link.stats["reconnects"] == 0 and time.monotonic() < deadline:
+            seq += 1
+            link.send(make_poses(1, seq=seq))
+            time.sleep(0.02)
+        assert link.stats["reconnects"] == 1
+        peer, _ = srv.accept()
+        peer.settimeout(5)
+        assert link.send(make_poses(1, seq=999)) or link.pending
+        got: list = []
+        reader = FrameReader()
+        while 999 not in [f.seq for f in got] and time.monotonic() < deadline:
+            got += reader.feed(peer.recv(4096))
+            link.send(make_poses(1, seq=999))
+        assert 999 in [f.seq for f in got]
+        peer.close()
+    finally:
+        link.close()
+        srv.close()

@@ -91,7 +91,7 @@ def frame(cam: Camera, t_ns: int, people: dict[str, Person], seed: int = 0) -> t
         if v is not None:
             views.append(v)
             names.append(name)
-    return Observation(SITE.name, cam.id, seed, t_ns, cam.width, cam.height, tuple(views)), names
+    return Observation(SITE.name, cam.id, t_ns // 1_000_000, t_ns, cam.width, cam.height, tuple(views)), names
 
 
 def run(tracker: Tracker, frames: Iterable[tuple[Observation, list[str]]]) -> dict[str, set[int]]:
@@ -518,3 +518,116 @@ def test_ten_people_in_one_camera_stay_ten_tracks():
     for obs in frames:
         tr.update(obs)
     assert len(tr.tracks) == 10
+
+
+# --- re-identification of people who were out of every camera's view ------------------------------
+
+def _confirm_then_lose(tr: Tracker, people: dict[str, Person], seconds: float = 3.0) -> int:
+    """Track ``people`` (all in C1) for ``seconds``, then let ``remove_after_s`` pass unseen."""
+    for k in range(round(seconds * 10)):
+        tr.update(frame(C1, T0 + k * S // 10, people, seed=k)[0])
+    end = T0 + round(seconds * S)
+    assert len(tr.people(end)) == len(people)
+    tr.prune(end + 3 * S)
+    assert tr.people(end + 3 * S) == []
+    return end + 3 * S
+
+
+@pytest.mark.parametrize(
+    ("back_x", "back_hue", "after_s", "same_id"),
+    [
+        (0.0, 20.0, 5.0, True),     # the same person back where they left: their id again
+        (2.0, 20.0, 5.0, True),     # ... 2 m away after 5 s: walkable
+        (0.0, 110.0, 5.0, False),   # someone in other clothes: a new id
+        (0.0, 20.0, 40.0, False),   # back after the 30 s window: forgotten, a new id
+    ],
+)
+def test_a_person_back_after_leaving_every_view_gets_their_id_back(back_x, back_hue, after_s, same_id):
+    tr = Tracker(SITE)
+    t = _confirm_then_lose(tr, {"a": (0.0, 0.0, 0.0, 20.0)}) + round(after_s * S)
+    for k in range(25):  # 2.5 s: long enough to confirm
+        tr.update(frame(C1, t + k * S // 10, {"a": (back_x, 0.0, 0.0, back_hue)}, seed=100 + k)[0])
+    (person,) = tr.people(t + 25 * S // 10)
+    assert (person.id == 1) == same_id and tr.stats["reidentified"] == int(same_id)
+
+
+def test_reidentification_needs_a_clear_winner_and_a_reachable_place():
+    # Two people in the same clothes leave together: who comes back is ambiguous, so a new id.
+    tr = Tracker(SITE)
+    t = _confirm_then_lose(tr, {"a": (-1.0, 0.0, 0.0, 20.0), "b": (1.0, 0.0, 0.0, 20.0)})
+    for k in range(25):
+        tr.update(frame(C1, t + k * S // 10, {"a": (-1.0, 0.0, 0.0, 20.0)}, seed=100 + k)[0])
+    assert [p.id for p in tr.people(t + 25 * S // 10)] == [3] and tr.stats["reidentified"] == 0
+    # Too far to have walked there (1.5 m/s for 0.5 s after removal, 8 m away): a new id.
+    tr = Tracker(SITE, TrackerConfig(reid_speed_mps=0.1))
+    t = _confirm_then_lose(tr, {"a": (-3.0, 0.0, 0.0, 20.0)})
+    for k in range(25):
+        tr.update(frame(C1, t + k * S // 10, {"a": (3.0, 0.0, 0.0, 20.0)}, seed=100 + k)[0])
+    assert [p.id for p in tr.people(t + 25 * S // 10)] == [2]
+
+
+# --- a cap on tracks --------------------------------------------------------------------------------
+
+def test_tracks_are_capped_and_people_already_tracked_keep_their_ids():
+    # A flood: 70 copies of one view per frame besides a real person, 5 frames/s for 10 s.
+    tr = Tracker(SITE)
+    real = {"a": (-2.0, 0.0, 0.0, 110.0)}
+    for k in range(25):
+        tr.update(frame(C1, T0 + k * S // 10, real, seed=k)[0])
+    (person,) = tr.people(T0 + 25 * S // 10)
+    fake = frame(C1, T0, {"f": (2.0, 1.0, 0.0, 20.0)})[0].people[0]
+    for k in range(50):
+        t = T0 + 25 * S // 10 + k * S // 5
+        obs = frame(C1, t, real, seed=k)[0]
+        obs = Observation(obs.site, obs.camera, obs.seq, t, obs.width, obs.height, obs.people + (fake,) * 70)
+        ms = tr.update(obs)
+        assert ms[0].track_id == person.id  # the real person keeps their id
+        assert len(tr.tracks) <= TrackerConfig().max_tracks
+    assert tr.stats["track_cap"] > 0 and len(tr.people(t)) <= 64
+
+
+def test_a_full_tracker_makes_room_by_evicting_the_stalest_candidate():
+    tr = Tracker(SITE, TrackerConfig(max_tracks=2))
+    tr.update(frame(C1, T0, {"a": (-2.0, 0.0, 0.0, 20.0), "b": (2.0, 0.0, 0.0, 110.0)})[0])
+    ms = tr.update(frame(C1, T0 + S // 10, {"c": (0.0, 2.0, 0.0, 60.0)})[0])
+    assert [m.status for m in ms] == ["created"] and len(tr.tracks) == 2 and tr.stats["evicted_candidates"] == 1
+
+
+# --- frame order: the future, duplicates, sequence numbers ----------------------------------------------
+
+def _obs(cam: Camera, t_ns: int, seq: int) -> Observation:
+    o = one_person(t_ns, cam=cam)
+    return Observation(o.site, o.camera, seq, t_ns, o.width, o.height, o.people)
+
+
+@pytest.mark.parametrize(
+    ("frames", "reasons"),
+    [
+        # (stamp ms, seq, host clock ms) per frame of c1
+        ([(0, 0, 5), (100, 1, 105), (100, 2, 205)], [None, None, "duplicate"]),       # same stamp again
+        ([(0, 5, 5), (100, 5, 105)], [None, "duplicate"]),                             # same frame re-stamped
+        ([(0, 5, 5), (100, 4, 105)], [None, "seq_backwards"]),                         # seq back, no restart
+        ([(0, 5, 5), (1500, 0, 1505)], [None, None]),                                  # seq back after 1.5 s: a restart
+        ([(0, 0, 5), (900, 1, 5), (70, 2, 75), (140, 3, 145)], [None, None, None, None]),  # 0.9 s ahead blinds nothing
+        ([(0, 0, 5), (900, 1, 5), (900, 2, 910)], [None, None, "duplicate"]),
+        ([(100, 0, 105), (50, 1, 110)], [None, "late"]),                               # older than the last
+        ([(0, 0, 2500)], ["stale"]),                                                   # older than remove_after_s
+    ],
+)
+def test_frames_are_admitted_in_order_whatever_their_stamps(frames, reasons):
+    tr = Tracker(SITE)
+    ms = 1_000_000
+    got = []
+    for stamp, seq, now in frames:
+        obs = _obs(C1, T0 + stamp * ms, seq)
+        got.append(tr.admit(obs, T0 + now * ms))
+        tr.update(obs, T0 + now * ms)
+    assert got == reasons
+
+
+def test_reset_camera_admits_a_restarted_node_at_once():
+    tr = Tracker(SITE)
+    tr.update(_obs(C1, T0, 50))
+    assert tr.admit(_obs(C1, T0 + S // 10, 0)) == "seq_backwards"
+    tr.reset_camera("c1")
+    assert tr.admit(_obs(C1, T0 + S // 10, 0)) is None

@@ -1,0 +1,222 @@
+"""Soak: the whole system under load for a long time, with a hostile phase in the middle.
+
+    python benchmarks/soak.py [--minutes 30] [--cameras 10] [--people 10] [--fps 15]
+                              [--sample-every 60] [--warmup-minutes 5] [--json-out F]
+    (make soak ARGS="..."; not part of the test suite)
+
+A Zenoh router, one simulated camera process per camera of a ring of cameras around an 8 x 6 m
+room (benchmarks/host_bench.ring_site), and the host (the site-independent int8 model), all on
+loopback. This process subscribes to the PoseArrays and, every ``sample_every`` seconds, samples
+the host's resident memory (VmRSS) and counts the arrays and people published.
+
+From 40 % to 60 % of the run it attacks the host as a stranger on the network would: 70
+liveliness tokens with names outside the site, 5 oversize (600 KB) and 20 garbage payloads a
+second, 2 frames a second stamped 0.9 s ahead on a real camera's key, and 64 copies of a person
+per frame on two cameras' keys at 5 frames a second (more tracks than a PoseArray may carry).
+
+At the end: the RSS slope after the warm-up (MB/min, least squares), arrays per minute, and the
+host's rejection counters. The host must keep publishing throughout and its memory stay flat.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections import Counter
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+
+from benchmarks.host_bench import ring_site  # noqa: E402
+from superbody.edge import transport, wire  # noqa: E402
+from superbody.edge.simulator import SimCamera, World  # noqa: E402
+from superbody.edge.site import dump_site  # noqa: E402
+from superbody.host import pose as pose_msg  # noqa: E402
+from tests.conftest import free_port  # noqa: E402
+
+MODEL = ROOT / "models" / "site-independent.int8.onnx"
+
+
+def _rss_mb(pid: int) -> float:
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def _spawn(args: list[str], log: Path) -> subprocess.Popen:
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    return subprocess.Popen([sys.executable, "-m", "superbody.edge.cli", *args], cwd=ROOT, env=env,
+                            stdout=open(log, "w"), stderr=subprocess.STDOUT, start_new_session=True)
+
+
+class _Attacker:
+    """The hostile phase, one burst a second from a thread until stopped."""
+
+    def __init__(self, session, site):
+        self.session, self.site, self.stop = session, site, threading.Event()
+        self.sent: Counter[str] = Counter()
+        cam = site.cameras[0].id
+        self.obs = json.loads(wire.encode(SimCamera(World(site, 2, seed=9), cam).observe(time.time_ns())[0]))
+        self.thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self) -> None:
+        s, site = self.session, self.site
+        tokens = [s.liveliness().declare_token(f"superbody/{site.name}/cameras/ev.il{i}/alive") for i in range(70)]
+        self.sent["bad_liveliness_tokens"] = len(tokens)
+        cams = [c.id for c in site.cameras[:2]]
+        pubs = {c: s.declare_publisher(transport.observation_key(site.name, c)) for c in cams}
+        k = 0
+        while not self.stop.is_set():
+            t = time.time_ns()
+            for _ in range(5):
+                pubs[cams[0]].put(b"{" + b" " * 600_000)
+                self.sent["oversize"] += 1
+            for _ in range(20):
+                pubs[cams[0]].put(os.urandom(200))
+                self.sent["garbage"] += 1
+            for _ in range(2):
+                pubs[cams[0]].put(json.dumps({**self.obs, "people": [], "seq": 0, "stamp_ns": t + 900_000_000}))
+                self.sent["future_stamp"] += 1
+            for _ in range(5):  # 5 flood frames a second on two cameras
+                for c in cams:
+                    k += 1
+                    doc = {**self.obs, "camera": c, "seq": 10**12 + k, "stamp_ns": time.time_ns(), "people": self.obs["people"][:1] * 64}
+                    pubs[c].put(json.dumps(doc))
+                    self.sent["flood_frames"] += 1
+                self.stop.wait(0.2)
+        for tok in tokens:
+            tok.undeclare()
+
+
+def main(minutes: float, cameras: int, people: int, fps: float, sample_every: float, warmup_min: float, json_out: str | None) -> int:
+    import zenoh
+
+    site = ring_site(cameras)
+    site = dataclasses.replace(site, cameras=tuple(dataclasses.replace(c, fps=fps) for c in site.cameras))
+    tmp = Path(tempfile.mkdtemp(prefix="superbody-soak-"))
+    site_file = tmp / "site.toml"
+    site_file.write_text(dump_site(site))
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    estimator = ["--model", str(MODEL)] if MODEL.is_file() else ["--estimator", "analytic"]
+    procs = {"router": _spawn(["router", "--listen", endpoint], tmp / "router.log")}
+    for c in site.cameras:
+        procs[c.id] = _spawn(["edge", "run", "--site", str(site_file), "--camera", c.id, "--seed", "1", "--people", str(people),
+                              "--connect", endpoint], tmp / f"camera-{c.id}.log")
+    procs["host"] = _spawn(["host", "run", "--site", str(site_file), *estimator, "--connect", endpoint, "--status-every", "10"],
+                           tmp / "host.log")
+    print(f"soak: {cameras} cameras x {people} people at {fps:g} fps, {minutes:g} min, estimator {estimator[-1]}; logs in {tmp}", flush=True)
+    lock = threading.Lock()
+    window = {"arrays": 0, "people": []}
+    last_status: dict = {}
+
+    def on_people(sample) -> None:
+        arr = pose_msg.decode(sample.payload.to_bytes())
+        with lock:
+            window["arrays"] += 1
+            window["people"].append(len(arr.people))
+
+    def on_status(sample) -> None:
+        last_status.update(json.loads(sample.payload.to_bytes()))
+
+    samples: list[dict] = []
+    conf = transport.session_config("peer", connect=[endpoint])
+    start = time.monotonic()
+    end = start + minutes * 60
+    hostile = (start + 0.4 * minutes * 60, start + 0.6 * minutes * 60)
+    attacker = None
+    try:
+        with zenoh.open(conf) as session:
+            subs = [session.declare_subscriber(transport.people_key(site.name), on_people),
+                    session.declare_subscriber(transport.host_status_key(site.name), on_status)]
+            next_sample = start + sample_every
+            while time.monotonic() < end:
+                for name, p in procs.items():
+                    if p.poll() is not None:
+                        raise RuntimeError(f"{name} exited with {p.returncode}; see {tmp}")
+                now = time.monotonic()
+                if attacker is None and hostile[0] <= now < hostile[1]:
+                    attacker = _Attacker(session, site)
+                    attacker.thread.start()
+                    print("soak: hostile phase starts", flush=True)
+                if attacker is not None and now >= hostile[1] and not attacker.stop.is_set():
+                    attacker.stop.set()
+                    attacker.thread.join(timeout=10)
+                    print(f"soak: hostile phase ends: sent {dict(attacker.sent)}", flush=True)
+                if now >= next_sample:
+                    with lock:
+                        arrays, ppl = window["arrays"], window["people"]
+                        window["arrays"], window["people"] = 0, []
+                    s = {"t_min": (now - start) / 60, "rss_mb": _rss_mb(procs["host"].pid), "arrays_per_min": arrays * 60 / sample_every,
+                         "people_median": float(np.median(ppl)) if ppl else 0.0,
+                         "hostile": bool(attacker is not None and not attacker.stop.is_set())}
+                    samples.append(s)
+                    print(f"soak: t={s['t_min']:5.1f} min  host RSS {s['rss_mb']:7.1f} MB  arrays/min {s['arrays_per_min']:6.0f}  "
+                          f"people (median) {s['people_median']:.0f}{'  [hostile]' if s['hostile'] else ''}", flush=True)
+                    next_sample += sample_every
+                time.sleep(0.2)
+            for s_ in subs:
+                s_.undeclare()
+    finally:
+        if attacker is not None:
+            attacker.stop.set()
+        for p in procs.values():
+            if p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+        for p in procs.values():
+            try:
+                p.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                p.kill()
+    def slope_of(window: list[dict]) -> float:
+        return float(np.polyfit([s["t_min"] for s in window], [s["rss_mb"] for s in window], 1)[0]) if len(window) >= 2 else float("nan")
+
+    after = [s for s in samples if s["t_min"] >= warmup_min]
+    slope = slope_of(after)
+    # The attack costs a one-time step (Zenoh's and the allocator's buffers, 64 tracks); growth
+    # is judged apart from it: before the attack and after it.
+    hostile_end_min = 0.6 * minutes
+    before = [s for s in after if not s["hostile"] and s["t_min"] < 0.4 * minutes + 1e-9]
+    post = [s for s in samples if s["t_min"] > hostile_end_min + sample_every / 60]
+    apm = [s["arrays_per_min"] for s in samples]
+    summary = {
+        "minutes": minutes, "cameras": cameras, "people": people, "fps": fps, "samples": samples,
+        "rss_slope_mb_per_min_after_warmup": slope, "warmup_minutes": warmup_min,
+        "rss_slope_mb_per_min_before_attack": slope_of(before), "rss_slope_mb_per_min_after_attack": slope_of(post),
+        "arrays_per_min": {"min": min(apm) if apm else 0, "max": max(apm) if apm else 0},
+        "host_rejected": last_status.get("rejected", {}), "host_queue_dropped": last_status.get("queue_dropped"),
+        "attack_sent": dict(attacker.sent) if attacker else {},
+    }
+    print(f"soak: RSS slope after {warmup_min:g} min warm-up: {slope:+.3f} MB/min over {len(after)} samples "
+          f"(before the attack {summary['rss_slope_mb_per_min_before_attack']:+.3f} over {len(before)}, "
+          f"after it {summary['rss_slope_mb_per_min_after_attack']:+.3f} over {len(post)}); "
+          f"arrays/min min {summary['arrays_per_min']['min']:.0f} max {summary['arrays_per_min']['max']:.0f}; "
+          f"host rejected {summary['host_rejected']}")
+    if json_out:
+        Path(json_out).write_text(json.dumps(summary, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--minutes", type=float, default=30.0)
+    ap.add_argument("--cameras", type=int, default=10)
+    ap.add_argument("--people", type=int, default=10)
+    ap.add_argument("--fps", type=float, default=15.0)
+    ap.add_argument("--sample-every", type=float, default=60.0, help="seconds between samples (default 60)")
+    ap.add_argument("--warmup-minutes", type=float, default=5.0)
+    ap.add_argument("--json-out")
+    a = ap.parse_args()
+    sys.exit(main(a.minutes, a.cameras, a.people, a.fps, a.sample_every, a.warmup_minutes, a.json_out))
