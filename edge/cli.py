@@ -57,8 +57,20 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _init_zenoh_log() -> None:
+    """Zenoh's own (Rust) logging from the environment, as its examples do: RUST_LOG=debug shows it."""
+    try:
+        import zenoh
+    except ImportError:  # a broken install: the command itself will say so
+        return
+    init = getattr(zenoh, "init_log_from_env_or", None)
+    if init is not None:
+        init("error")
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    _init_zenoh_log()
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO,
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",

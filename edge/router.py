@@ -19,11 +19,12 @@ __all__ = ["run_router", "register"]
 log = logging.getLogger("superbody.router")
 
 
-def run_router(listen: list[str], stop: threading.Event, config_file: str | None = None) -> None:
-    """Run a router listening on ``listen`` (empty: the config file's endpoints) until ``stop`` is set."""
+def run_router(listen: list[str], stop: threading.Event, config_file: str | None = None, cfg: list[str] | None = None) -> None:
+    """Run a router listening on ``listen`` (empty: the config file's endpoints) until ``stop`` is set;
+    ``cfg`` are ``KEY:VALUE`` Zenoh settings applied last."""
     import zenoh
 
-    conf = transport.session_config("router", connect=[], listen=listen or None, config_file=config_file)
+    conf = transport.session_config("router", connect=[], listen=listen or None, config_file=config_file, cfg=cfg)
     with zenoh.open(conf):
         log.info("zenoh router listening on %s", ", ".join(listen) if listen else conf.get_json("listen/endpoints"))
         stop.wait()
@@ -34,7 +35,7 @@ def _run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     try:
-        run_router(args.listen or ([] if args.config else [transport.DEFAULT_ENDPOINT]), stop, args.config)
+        run_router(args.listen or ([] if args.config else [transport.DEFAULT_ENDPOINT]), stop, args.config, args.cfg)
     except transport.ConfigError as e:
         print(f"superbody router: error: {e}", file=sys.stderr)
         return 2
@@ -45,4 +46,5 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("router", help="run a Zenoh router (loopback by default)")
     p.add_argument("-l", "--listen", action="append", metavar="ENDPOINT", help=f"endpoint to listen on (default {transport.DEFAULT_ENDPOINT})")
     p.add_argument("-c", "--config", metavar="FILE", help="Zenoh JSON5 configuration file")
+    p.add_argument("--cfg", action="append", metavar="KEY:VALUE", help="a Zenoh config setting, JSON5 value, applied last (repeatable)")
     p.set_defaults(func=_run)

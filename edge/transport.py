@@ -10,7 +10,8 @@ loopback is still delivered with that limit set, so the host's own size check be
 (host.aggregator) is what bounds the memory a large payload costs. Endpoints given on the command line
 are checked (``check_endpoint``) so a typo is a one-line error, not a retry loop for ever.
 Secured deployments pass a config file (``--config``, see deploy/zenoh/): it is used as
-written, except for options given on the command line.
+written, except for options given on the command line; ``--cfg KEY:VALUE`` (as in the Zenoh
+examples) sets any other config path and wins over both.
 
 Keys (everything under ``superbody/<site>/``):
 
@@ -44,6 +45,7 @@ __all__ = [
     "host_status_key",
     "camera_from_key",
     "check_endpoint",
+    "parse_cfg",
     "ConfigError",
     "MAX_MESSAGE_BYTES",
     "LOOPBACK_LISTEN",
@@ -129,11 +131,26 @@ def camera_from_key(key: str) -> str | None:
     return parts[3] if len(parts) >= 5 and parts[0] == "superbody" and parts[2] == "cameras" else None
 
 
+def parse_cfg(text: str) -> tuple[str, str]:
+    """``KEY:VALUE`` as the Zenoh examples' ``--cfg`` takes it: a config path and a JSON5 value,
+    e.g. ``transport/link/tx/lease:3000`` or ``connect/endpoints:["tcp/10.0.0.1:7447"]``.
+
+    Raises:
+        ConfigError: no ``:``, or an empty key or value.
+    """
+    key, sep, value = str(text).partition(":")
+    if not sep or not key.strip() or not value.strip():
+        raise ConfigError(f"--cfg {text!r}: must be KEY:VALUE, a Zenoh config path and a JSON5 value, "
+                          'e.g. transport/link/tx/lease:3000 or connect/endpoints:["tcp/127.0.0.1:7447"]')
+    return key.strip(), value.strip()
+
+
 def session_config(
     mode: Mode | None = "peer",
     connect: list[str] | None = None,
     listen: list[str] | None = None,
     config_file: str | None = None,
+    cfg: list[str] | None = None,
 ) -> "zenoh.Config":
     """Build a Zenoh config.
 
@@ -143,6 +160,7 @@ def session_config(
         listen: endpoints to listen on; None means loopback only (``LOOPBACK_LISTEN``) for a
             peer without a config file.
         config_file: a Zenoh JSON5 config file; the other arguments override it where given.
+        cfg: ``KEY:VALUE`` settings (``parse_cfg``) applied last, so they override everything.
 
     Connections are retried for ever (``connect/timeout_ms: -1``, ``exit_on_failure: false``),
     so a node started before its peer or router publishes as soon as it is reachable.
@@ -184,6 +202,13 @@ def session_config(
         conf.insert_json5("connect/timeout_ms", "-1")
         conf.insert_json5("connect/exit_on_failure", "false")
         conf.insert_json5("connect/retry", '{"period_init_ms": 200, "period_max_ms": 2000, "period_increase_factor": 2}')
+    for item in cfg or ():
+        key, value = parse_cfg(item)
+        try:
+            conf.insert_json5(key, value)
+        except Exception as e:  # zenoh's ZError: an unknown key or a value of the wrong type
+            why = re.sub(r" at \S+\.rs:\d+\.?$", "", " ".join(str(e).split()))[:200] or type(e).__name__
+            raise ConfigError(f"--cfg {item!r}: Zenoh refuses it: {why}") from None
     return conf
 
 
@@ -194,7 +219,9 @@ def add_session_args(parser: argparse.ArgumentParser) -> None:
     g.add_argument("-e", "--connect", action="append", metavar="ENDPOINT", help=f"endpoint to connect to (repeatable; default {DEFAULT_ENDPOINT})")
     g.add_argument("-l", "--listen", action="append", metavar="ENDPOINT", help="endpoint to listen on (repeatable)")
     g.add_argument("-c", "--config", metavar="FILE", help="Zenoh JSON5 configuration file")
+    g.add_argument("--cfg", action="append", metavar="KEY:VALUE",
+                   help='a Zenoh config setting, JSON5 value, applied last (repeatable), e.g. --cfg transport/link/tx/lease:3000')
 
 
 def config_from_args(args: argparse.Namespace) -> "zenoh.Config":
-    return session_config(args.mode, args.connect, args.listen, args.config)
+    return session_config(args.mode, args.connect, args.listen, args.config, getattr(args, "cfg", None))

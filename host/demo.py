@@ -45,6 +45,7 @@ log = logging.getLogger("superbody.demo")
 
 DEFAULT_SITE = site_path("wtf-apartment")  # shipped with the package (edge/resources.py)
 _MATCH_GATE_M = 1.0
+DEMO_PORT = 17447  # not zenohd's 7447
 
 
 @dataclass
@@ -57,7 +58,8 @@ class DemoConfig:
         seed: simulator seed.
         duration_s: stop after this many simulated seconds (None: until Ctrl-C).
         clock_scale: simulated seconds per wall second.
-        port: loopback port of the demo's Zenoh router.
+        port: loopback port of the demo's Zenoh router; 0 picks a free one. The default, 17447, is
+            not Zenoh's 7447, so a zenohd already running on the machine does not collide with it.
         estimator: "auto", "hybrid", "onnx" or "analytic" (host.cli.build_estimator).
         model: ONNX model (default: the shipped one for the site).
         kill_camera: a camera id to kill mid-run (fault injection), or None.
@@ -71,7 +73,7 @@ class DemoConfig:
     seed: int = 7
     duration_s: float | None = None
     clock_scale: float = 1.0
-    port: int = 7447
+    port: int = DEMO_PORT
     estimator: str = "auto"
     model: str | None = None
     kill_camera: str | None = None
@@ -205,6 +207,19 @@ def _spawn(args: list[str], log_path: Path) -> subprocess.Popen:
                             start_new_session=True)
 
 
+def demo_port(port: int) -> int:
+    """``port`` if it is free on 127.0.0.1 (0: a free one); ``RuntimeError`` naming it if it is taken."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError:
+            raise RuntimeError(f"port {port} on 127.0.0.1 is taken (another demo, or a Zenoh router?); "
+                               "pass --port P for another, or --port 0 for any free one") from None
+        return s.getsockname()[1]
+
+
 def run_demo(cfg: DemoConfig, stop: threading.Event | None = None) -> dict:
     """Run the demo until ``stop`` or ``cfg.duration_s``; returns the summary."""
     import zenoh
@@ -214,7 +229,7 @@ def run_demo(cfg: DemoConfig, stop: threading.Event | None = None) -> dict:
     site_file = str(Path(cfg.site).resolve())  # the processes get absolute paths: no dependence on their folder
     log_dir = Path(cfg.log_dir or tempfile.mkdtemp(prefix="superbody-demo-"))
     log_dir.mkdir(parents=True, exist_ok=True)
-    endpoint = f"tcp/127.0.0.1:{cfg.port}"
+    endpoint = f"tcp/127.0.0.1:{demo_port(cfg.port)}"
     # The world clock starts a little in the future so every process starts on the same grid.
     anchor = time.time_ns()
     clock = WorldClock(anchor, cfg.clock_scale)
@@ -325,7 +340,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=7, help="simulator seed (default 7)")
     p.add_argument("--duration", type=positive, default=None, help="stop after this many simulated seconds (default: Ctrl-C)")
     p.add_argument("--clock-scale", type=positive, default=1.0, help="simulated seconds per wall second (default 1)")
-    p.add_argument("--port", type=int_in(1, 65535, "--port"), default=7447, help="loopback port of the demo's Zenoh router (default 7447)")
+    p.add_argument("--port", type=int_in(0, 65535, "--port"), default=DEMO_PORT,
+                   help=f"loopback port of the demo's Zenoh router (default {DEMO_PORT}, not zenohd's 7447; 0: any free port)")
     p.add_argument("--estimator", choices=("auto", "hybrid", "onnx", "analytic"), default="auto",
                    help="pose estimator (default auto: the shipped int8 model, fused with geometry when it carries a hybrid calibration)")
     p.add_argument("--model", help="ONNX model (default: models/<site>.int8.onnx)")

@@ -243,7 +243,8 @@ def open_from_args(args: argparse.Namespace):
 
     config = Ros2Config(topic=args.ros2_topic, domain_id=args.ros2_domain)
     _typestore()  # rosbags present (ImportError) before any session is opened
-    conf = transport.session_config("peer" if args.mode == "router" else args.mode, args.connect or args.listen, [], args.config)
+    conf = transport.session_config("peer" if args.mode == "router" else args.mode, args.connect or args.listen, [], args.config,
+                                    getattr(args, "cfg", None))
     session = zenoh.open(conf)
     try:
         return session, Ros2Publisher(session, config)

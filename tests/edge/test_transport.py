@@ -69,3 +69,70 @@ def test_default_peer_listens_on_loopback_only_and_caps_message_size():
     assert conf.get_json("listen/endpoints") == '["tcp/127.0.0.1:0"]'
     assert int(conf.get_json("transport/link/rx/max_message_size")) == MAX_MESSAGE_BYTES
     assert session_config("peer", listen=["tcp/127.0.0.1:7000"]).get_json("listen/endpoints") == '["tcp/127.0.0.1:7000"]'
+
+
+# --- the Zenoh examples' conventions: --cfg KEY:VALUE, logging from the environment ----------
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("transport/link/tx/lease:3000", ("transport/link/tx/lease", "3000")),                           # a number
+    ('connect/endpoints:["tcp/127.0.0.1:7447"]', ("connect/endpoints", '["tcp/127.0.0.1:7447"]')),  # the value keeps its colons
+    (" mode : \"client\" ", ("mode", '"client"')),                                                  # spaces trimmed
+])
+def test_parse_cfg(text, expected):
+    from superbody.edge.transport import parse_cfg
+
+    assert parse_cfg(text) == expected
+
+
+@pytest.mark.parametrize("text", ["mode", ":3000", "transport/link/tx/lease:", ""])
+def test_parse_cfg_rejects(text):
+    from superbody.edge.transport import ConfigError, parse_cfg
+
+    with pytest.raises(ConfigError, match="KEY:VALUE"):
+        parse_cfg(text)
+
+
+def test_cfg_is_applied_last_and_wins():
+    conf = session_config("peer", cfg=['mode:"client"', "scouting/multicast/enabled:true"])
+    assert conf.get_json("mode") == '"client"'
+    assert conf.get_json("scouting/multicast/enabled") == "true"  # over our default of false
+
+
+def test_cfg_that_zenoh_refuses_names_the_setting():
+    from superbody.edge.transport import ConfigError
+
+    with pytest.raises(ConfigError, match="no/such/key"):
+        session_config("peer", cfg=["no/such/key:1"])
+
+
+def test_cli_cfg_error_is_one_line(tmp_path):
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, "-m", "superbody.edge.cli", "router", "--listen", "tcp/127.0.0.1:0", "--cfg", "mode"],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and r.stderr.strip().splitlines()[-1].startswith("superbody router: error: --cfg 'mode'"), r.stderr
+
+
+def test_zenoh_logging_follows_rust_log():
+    """RUST_LOG=debug shows Zenoh's own log lines, as with Zenoh's examples; by default they are quiet."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    from tests.conftest import free_port
+
+    def run(env_extra: dict) -> str:
+        env = {k: v for k, v in os.environ.items() if k != "RUST_LOG"} | env_extra
+        p = subprocess.Popen([sys.executable, "-m", "superbody.edge.cli", "router", "--listen", f"tcp/127.0.0.1:{free_port()}"],
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+        try:
+            p.wait(timeout=3)
+        except subprocess.TimeoutExpired:
+            p.send_signal(signal.SIGTERM)
+        return p.communicate(timeout=20)[0]
+
+    assert "zenoh::net::runtime" in run({"RUST_LOG": "debug"})  # a Rust module path: Zenoh's own log line
+    assert "zenoh::" not in run({})
