@@ -201,6 +201,9 @@ class ReplaySource:
         if self.start_ns is None:
             self.start_ns = time.time_ns()
         shift = self.start_ns - self.t0_ns
+        wait_s = (self.start_ns - time.time_ns()) / _NS
+        log.info("%s: camera %s, %.1f s recorded, replay starts %s", self.name, self.camera_id, (self.t_end_ns - self.t0_ns) / _NS,
+                 f"in {wait_s:.1f} s" if wait_s > 0 else f"{-wait_s:.1f} s ago (frames later than {self.max_late_ns / _NS:g} s are skipped)")
         while not self._closed.is_set():
             any_obs = False
             for obs in self._observations():
