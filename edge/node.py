@@ -11,7 +11,9 @@ Sources (``--source``):
   ``oak`` extra);
 - ``video:PATH``, ``webcam:INDEX``, ``rtsp://...``: OpenCV captures (edge/video.py) whose images
   go through a host detector, ``--detector blazepose | yolo-pose:PATH.onnx | rtmo:PATH.onnx``
-  (edge/detector.py).
+  (edge/detector.py);
+- ``replay:PATH``: a ``superbody record`` MCAP file, this camera's Observations re-published
+  with their original timing, stamps shifted to the replay's start (edge/replay.py).
 
 Every frame takes one path (edge/source.py): detections from the source or from the detector,
 each person's colour signature from their box in the image when there is one, then encode,
@@ -56,7 +58,7 @@ __all__ = [
 
 log = logging.getLogger("superbody.edge")
 
-SOURCE_FORMS = ("sim", "oak[:DEVICE_ID]", "video:PATH", "webcam:INDEX", "rtsp://...")
+SOURCE_FORMS = ("sim", "oak[:DEVICE_ID]", "video:PATH", "webcam:INDEX", "rtsp://...", "replay:PATH.mcap")
 DEFAULT_OAK_MODEL = "luxonis/yolov8-nano-pose-estimation:coco-512x288"
 _MAX_WEBCAM = 63
 
@@ -67,10 +69,11 @@ class SourceSpec:
 
     Attributes:
         kind: which source.
-        target: OAK device id (or None: the first device), video path, webcam index or RTSP URL.
+        target: OAK device id (or None: the first device), video path, webcam index, RTSP URL or
+            MCAP recording path.
     """
 
-    kind: Literal["sim", "oak", "video", "webcam", "rtsp"]
+    kind: Literal["sim", "oak", "video", "webcam", "rtsp", "replay"]
     target: str | int | None = None
 
     @property
@@ -98,6 +101,10 @@ def parse_source(text: str) -> SourceSpec:
         if not rest:
             raise ValueError(f"--source {text!r}: the video file path after 'video:' is empty")
         return SourceSpec("video", rest)
+    if kind == "replay" and sep:
+        if not rest:
+            raise ValueError(f"--source {text!r}: the MCAP recording path after 'replay:' is empty")
+        return SourceSpec("replay", rest)
     if kind == "webcam" and sep:
         if not (rest.isdigit() and int(rest) <= _MAX_WEBCAM):
             raise ValueError(f"--source {text!r}: the webcam index must be an integer in [0, {_MAX_WEBCAM}], got {rest!r}")
@@ -122,6 +129,7 @@ def open_source(
     oak_model: str = DEFAULT_OAK_MODEL,
     realtime: bool = True,
     loop: bool = False,
+    replay_start_ns: int | None = None,
 ) -> FrameSource:
     """Open the source a spec names for one camera of a site.
 
@@ -141,6 +149,13 @@ def open_source(
             return open_oak_source(site, camera_id, spec.target, nn_archive, oak_model, depth)  # type: ignore[arg-type]
         except ImportError as e:
             raise SourceError(f"--source {spec}: OAK support is not installed (pip install 'superbody[oak]'): {e}") from None
+    if spec.kind == "replay":
+        from superbody.edge.replay import ReplaySource
+
+        try:
+            return ReplaySource(str(spec.target), site, camera_id, start_ns=replay_start_ns, loop=loop)
+        except ImportError as e:
+            raise SourceError(f"--source {spec}: replay needs the mcap package (pip install 'superbody[view]'): {e}") from None
     from superbody.edge.video import VideoSource
 
     return VideoSource(spec.kind, spec.target, cam.width, cam.height, realtime=realtime, loop=loop)  # type: ignore[arg-type]
@@ -269,12 +284,15 @@ def _check_options(args: argparse.Namespace) -> None:
     only = {
         "sim": [("--seed", args.seed), ("--people", args.people)],
         "oak": [("--nn-archive", args.nn_archive), ("--oak-model", args.oak_model)],
-        "video": [("--fast", args.fast or None), ("--loop", args.loop or None)],
+        "video": [("--fast", args.fast or None)],
+        "replay": [("--replay-start-ns", args.replay_start_ns)],
     }
     for kind, options in only.items():
         for name, value in options:
             if value is not None and spec.kind != kind:
                 raise ValueError(f"{name} is for --source {kind}, not --source {spec}")
+    if args.loop and spec.kind not in ("video", "replay"):
+        raise ValueError(f"--loop is for --source video and replay, not --source {spec}")
     if args.depth and spec.kind not in ("sim", "oak"):
         raise ValueError(f"--depth is for --source sim and oak, not --source {spec}")
     if spec.kind != "sim" and (args.clock_scale != 1.0 or args.clock_anchor_ns != 0):
@@ -298,7 +316,8 @@ def _run(args: argparse.Namespace) -> int:
     try:
         source = open_source(spec, site, args.camera, seed=args.seed or 0, people=3 if args.people is None else args.people,
                              depth=args.depth, clock=clock, nn_archive=args.nn_archive,
-                             oak_model=args.oak_model or DEFAULT_OAK_MODEL, realtime=not args.fast, loop=args.loop)
+                             oak_model=args.oak_model or DEFAULT_OAK_MODEL, realtime=not args.fast, loop=args.loop,
+                             replay_start_ns=args.replay_start_ns)
     except SourceError as e:
         return error(e)
     detector = None
@@ -339,7 +358,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--nn-archive", default=None, metavar="PATH", help="oak: a local NN archive instead of the model zoo's")
     p.add_argument("--oak-model", default=None, metavar="NAME", help=f"oak: model zoo name (default {DEFAULT_OAK_MODEL})")
     p.add_argument("--fast", action="store_true", help="video: read frames as fast as the detector goes, not in real time")
-    p.add_argument("--loop", action="store_true", help="video: start the file again at its end")
+    p.add_argument("--loop", action="store_true", help="video, replay: start the file again at its end")
+    p.add_argument("--replay-start-ns", type=int_in(0, 2**63 - 1, "--replay-start-ns"), default=None, metavar="NS",
+                   help="replay: wall time (UNIX ns) at which the recording's first observation is replayed; "
+                        "give every camera replayed from one file the same (default: when the node starts)")
     p.add_argument("--duration", type=positive, default=None, help="stop after this many seconds of world time")
     add_clock_args(p)
     transport.add_session_args(p)

@@ -130,7 +130,7 @@ def test_killed_node_drops_its_liveliness_token(processes, listener):
 BAD_ARGS = [
     (["--camera", "zz"], "nw, ne, se, sw"),  # unknown camera lists the valid ones
     (["--camera", "nw", "--people", "500"], "--people must be in [0, 64]"),
-    (["--camera", "nw", "--source", "kinect"], "--source must be one of sim, oak[:DEVICE_ID], video:PATH, webcam:INDEX, rtsp://..., got 'kinect'"),
+    (["--camera", "nw", "--source", "kinect"], "--source must be one of sim, oak[:DEVICE_ID], video:PATH, webcam:INDEX, rtsp://..., replay:PATH.mcap, got 'kinect'"),
     (["--camera", "nw", "--clock-scale", "-1"], "positive"),
 ]
 
@@ -207,7 +207,7 @@ def test_parse_source(text, spec):
 
 # (--source value, fragment of the error)
 BAD_SOURCES = [
-    ("kinect", "--source must be one of sim, oak[:DEVICE_ID], video:PATH, webcam:INDEX, rtsp://..., got 'kinect'"),
+    ("kinect", "--source must be one of sim, oak[:DEVICE_ID], video:PATH, webcam:INDEX, rtsp://..., replay:PATH.mcap, got 'kinect'"),
     ("", "got ''"),
     ("SIM", "got 'SIM'"),
     ("oak:", "the OAK device id after 'oak:' is empty"),
