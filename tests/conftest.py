@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import socket
 import subprocess
+import threading
 import sys
 from pathlib import Path
 
@@ -59,3 +61,36 @@ def processes():
 def dev_json() -> Path:
     assert DEV_JSON.is_file(), f"the WheresTheFellow dev split is expected at {DEV_JSON} (see README)"
     return DEV_JSON
+
+
+class HostWatch:
+    """A host's PoseArrays and status messages on one site, as they arrive (for multi-process tests)."""
+
+    def __init__(self, session, site: str):
+        from superbody.edge import transport
+
+        self.arrays: list = []
+        self.status: list[dict] = []
+        self.cv = threading.Condition()
+        self.subs = [session.declare_subscriber(transport.people_key(site), self._people),
+                     session.declare_subscriber(transport.host_status_key(site), self._status)]
+
+    def _people(self, sample) -> None:
+        from superbody.host import pose as pose_msg
+
+        with self.cv:
+            self.arrays.append(pose_msg.decode(sample.payload.to_bytes()))
+            self.cv.notify_all()
+
+    def _status(self, sample) -> None:
+        with self.cv:
+            self.status.append(json.loads(sample.payload.to_bytes()))
+            self.cv.notify_all()
+
+    def wait(self, predicate, timeout: float) -> bool:
+        with self.cv:
+            return self.cv.wait_for(predicate, timeout=timeout)
+
+    def close(self) -> None:
+        for s in self.subs:
+            s.undeclare()

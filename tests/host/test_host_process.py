@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import threading
 import time
 
 import pytest
@@ -12,9 +11,8 @@ import zenoh
 from superbody.edge import transport, wire
 from superbody.edge.simulator import SimCamera, World
 from superbody.edge.site import load_site
-from superbody.host import pose as pose_msg
 from superbody.host.demo import DemoConfig, run_demo
-from tests.conftest import WTF_SITE, free_port
+from tests.conftest import HostWatch, WTF_SITE, free_port
 
 SITE = str(WTF_SITE)
 
@@ -42,35 +40,12 @@ def test_three_people_sixty_seconds_and_a_camera_killed():
     assert summary["host_reported_camera_gone"], summary
 
 
-class _Watch:
-    def __init__(self, session, site: str):
-        self.arrays: list[pose_msg.PoseArray] = []
-        self.status: list[dict] = []
-        self.cv = threading.Condition()
-        self.subs = [session.declare_subscriber(transport.people_key(site), self._people),
-                     session.declare_subscriber(transport.host_status_key(site), self._status)]
-
-    def _people(self, sample):
-        with self.cv:
-            self.arrays.append(pose_msg.decode(sample.payload.to_bytes()))
-            self.cv.notify_all()
-
-    def _status(self, sample):
-        with self.cv:
-            self.status.append(json.loads(sample.payload.to_bytes()))
-            self.cv.notify_all()
-
-    def wait(self, predicate, timeout: float) -> bool:
-        with self.cv:
-            return self.cv.wait_for(predicate, timeout=timeout)
-
-
 def test_malformed_payloads_are_counted_and_the_host_keeps_publishing(processes):
     port = free_port()
     site = load_site(SITE)
     conf = transport.session_config("peer", connect=[], listen=[f"tcp/127.0.0.1:{port}"])
     with zenoh.open(conf) as session:
-        watch = _Watch(session, site.name)
+        watch = HostWatch(session, site.name)
         processes.start("host", "run", "--site", SITE, "--estimator", "analytic", "--status-every", "0.5",
                         "--connect", f"tcp/127.0.0.1:{port}")
         for cam in site.camera_ids:

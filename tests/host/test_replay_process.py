@@ -21,8 +21,6 @@ cameras by different constants would not).
 
 from __future__ import annotations
 
-import json
-import threading
 import time
 from collections import Counter, defaultdict
 
@@ -33,42 +31,13 @@ from superbody.edge import transport
 from superbody.edge.replay import scan_recording
 from superbody.edge.site import load_site
 from superbody.host import pose as pose_msg
-from tests.conftest import WTF_SITE, free_port
+from tests.conftest import HostWatch, WTF_SITE, free_port
 
 SITE = str(WTF_SITE)
 PEOPLE = 2
 RECORD_S = 8.0
 SETTLE_NS = 10**9  # compare from 1 s after a replayed track's first pose
 MEDIAN_M, P90_M, MIN_MATCHED = 0.02, 0.10, 0.8
-
-
-class _Watch:
-    """PoseArrays and host status of one site, as they arrive."""
-
-    def __init__(self, session, site: str):
-        self.arrays: list[pose_msg.PoseArray] = []
-        self.status: list[dict] = []
-        self.cv = threading.Condition()
-        self.subs = [session.declare_subscriber(transport.people_key(site), self._people),
-                     session.declare_subscriber(transport.host_status_key(site), self._status)]
-
-    def _people(self, sample):
-        with self.cv:
-            self.arrays.append(pose_msg.decode(sample.payload.to_bytes()))
-            self.cv.notify_all()
-
-    def _status(self, sample):
-        with self.cv:
-            self.status.append(json.loads(sample.payload.to_bytes()))
-            self.cv.notify_all()
-
-    def wait(self, predicate, timeout: float) -> bool:
-        with self.cv:
-            return self.cv.wait_for(predicate, timeout=timeout)
-
-    def close(self):
-        for s in self.subs:
-            s.undeclare()
 
 
 def _stop(*procs):
@@ -109,7 +78,7 @@ def test_a_host_fed_the_replay_publishes_the_recorded_tracks(processes, tmp_path
     live += [processes.start("edge", "run", "--site", SITE, "--camera", cam, "--seed", "3", "--people", str(PEOPLE), "--connect", ep)
              for cam in site.camera_ids]
     with zenoh.open(transport.session_config("peer", connect=[ep])) as session:
-        watch = _Watch(session, site.name)
+        watch = HostWatch(session, site.name)
         assert watch.wait(lambda: any(s["cameras_alive"] == list(site.camera_ids) for s in watch.status)
                           and any(len(a.people) == PEOPLE for a in watch.arrays), 60), watch.status[-1:]
         watch.close()
@@ -125,7 +94,7 @@ def test_a_host_fed_the_replay_publishes_the_recorded_tracks(processes, tmp_path
     processes.start("router", "--listen", ep)
     processes.start("host", "run", "--site", SITE, "--estimator", "analytic", "--status-every", "0.5", "--connect", ep)
     with zenoh.open(transport.session_config("peer", connect=[ep])) as session:
-        watch = _Watch(session, site.name)
+        watch = HostWatch(session, site.name)
         assert watch.wait(lambda: bool(watch.status), 30), "the fresh host never reported"
         start_ns = time.time_ns() + 3 * 10**9  # the replay nodes start within that (bounded below: skipped counts)
         replays = [processes.start("edge", "run", "--site", SITE, "--camera", cam, "--source", f"replay:{out}",

@@ -7,42 +7,14 @@ publish people whose views include camera 1's.
 
 from __future__ import annotations
 
-import json
-import threading
 
 import zenoh
 
 from superbody.edge import transport
-from superbody.host import pose as pose_msg
-from tests.conftest import WTF_SITE, free_port
+from tests.conftest import HostWatch, WTF_SITE, free_port
 from tests.edge.photos import astronaut_video
 
 SITE = str(WTF_SITE)
-
-
-class _Watch:
-    """The host's PoseArrays and status messages, as they arrive."""
-
-    def __init__(self, session, site: str):
-        self.arrays: list[pose_msg.PoseArray] = []
-        self.status: list[dict] = []
-        self.cv = threading.Condition()
-        self.subs = [session.declare_subscriber(transport.people_key(site), self._people),
-                     session.declare_subscriber(transport.host_status_key(site), self._status)]
-
-    def _people(self, sample):
-        with self.cv:
-            self.arrays.append(pose_msg.decode(sample.payload.to_bytes()))
-            self.cv.notify_all()
-
-    def _status(self, sample):
-        with self.cv:
-            self.status.append(json.loads(sample.payload.to_bytes()))
-            self.cv.notify_all()
-
-    def wait(self, predicate, timeout: float) -> bool:
-        with self.cv:
-            return self.cv.wait_for(predicate, timeout=timeout)
 
 
 def test_video_node_and_two_simulated_nodes_feed_one_host(processes, tmp_path):
@@ -52,7 +24,7 @@ def test_video_node_and_two_simulated_nodes_feed_one_host(processes, tmp_path):
     endpoint = f"tcp/127.0.0.1:{port}"
     conf = transport.session_config("peer", connect=[], listen=[endpoint])
     with zenoh.open(conf) as session:
-        watch = _Watch(session, "wtf-apartment")
+        watch = HostWatch(session, "wtf-apartment")
         host = processes.start("host", "run", "--site", SITE, "--status-every", "0.5", "--connect", endpoint)
         video = processes.start("edge", "run", "--site", SITE, "--camera", "1", "--source", f"video:{clip}", "--loop",
                                 "--detector", "blazepose", "--connect", endpoint)
