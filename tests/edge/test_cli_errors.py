@@ -46,7 +46,7 @@ CASES = [
     (["router", "--config", "{d}/bad.json5"], "router", "bad.json5: not a readable Zenoh JSON5 config"),
     (["demo", "--site", "{d}/latin1.toml"], "demo", "latin1.toml: not UTF-8 text (byte 0xe9 at offset 18, line 2)"),
     (["edge", "run", "--site", "{d}/latin1.toml", "--camera", "1"], "edge run", "latin1.toml: not UTF-8 text"),
-    (["demo", "--port", "99999"], "demo", "--port must be in [1, 65535], got 99999"),
+    (["demo", "--port", "99999"], "demo", "--port must be in [0, 65535], got 99999"),
 ]
 
 
