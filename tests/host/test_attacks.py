@@ -59,6 +59,16 @@ class HostThread:
         self.thread.join(timeout=20)
 
 
+def _wait_matched(*publishers) -> None:
+    """Every put must reach the host: wait until its subscriber matches each publisher (a put
+    made before the route exists is dropped by Zenoh, by design)."""
+    for _ in range(100):  # bounded: 100 x 0.05 s
+        if all(p.matching_status.matching for p in publishers):
+            return
+        time.sleep(0.05)
+    raise AssertionError("the host's subscriber never matched the attacker's publishers")
+
+
 def _attacker(endpoint: str):
     return zenoh.open(transport.session_config("peer", connect=[endpoint]))
 
@@ -103,6 +113,7 @@ def test_a_flood_of_fake_people_never_stops_publishing():
     """#2: more than 64 tracks and nothing was published ("people: must have at most 64 entries")."""
     with HostThread() as host, _attacker(host.endpoint) as evil:
         pubs = {c: evil.declare_publisher(transport.observation_key(SITE.name, c)) for c in ("1", "2")}
+        _wait_matched(*pubs.values())
         t_start = time.monotonic()
         flood = _flood_frames()
         for k in range(35):  # 3.5 s at 10 frames/s: long enough for candidates to be confirmed
@@ -126,6 +137,7 @@ def test_near_future_stamps_over_zenoh_cannot_blind_a_camera():
         cam = SimCamera(world, "1")
         real = cam_session.declare_publisher(transport.observation_key(SITE.name, "1"))
         fake = evil.declare_publisher(transport.observation_key(SITE.name, "1"))
+        _wait_matched(real, fake)
         forged = json.loads(wire.encode(cam.observe(time.time_ns())[0]))
         real.put(wire.encode(cam.observe(time.time_ns())[0]))  # the camera is known before the attack
         assert host.wait(lambda: host.agg.accepted == 1, timeout=10)
