@@ -212,8 +212,11 @@ def demo_port(port: int) -> int:
     import socket
 
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        # As the router will: a port left in TIME_WAIT by the previous demo is free, a listener is not.
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             s.bind(("127.0.0.1", port))
+            s.listen(1)
         except OSError:
             raise RuntimeError(f"port {port} on 127.0.0.1 is taken (another demo, or a Zenoh router?); "
                                "pass --port P for another, or --port 0 for any free one") from None
