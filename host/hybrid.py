@@ -34,7 +34,7 @@ from superbody.edge.site import Site
 from superbody.host.analytic import AnalyticEstimator
 from superbody.host.estimator import Estimates, ModelMismatchError, OnnxEstimator
 
-__all__ = ["HybridCalibration", "HybridEstimator", "fuse", "META_HYBRID", "SOURCES"]
+__all__ = ["HybridCalibration", "HybridEstimator", "fuse", "combine", "META_HYBRID", "SOURCES"]
 
 META_HYBRID: Final[str] = "hybrid.calibration"
 SOURCES: Final[tuple[str, ...]] = ("hybrid", "onnx", "analytic")
@@ -155,16 +155,31 @@ class HybridEstimator:
             return Estimates(np.zeros((0, 3)), np.zeros((0, 3)), ())
         net, net_std = self.net.estimate_with_std(view_sets)
         geo, pair = self.analytic.estimate_with_pairs(view_sets)
-        cams = np.array([len(v) for v in view_sets])
-        geo_std = self.calibration.analytic_sigmas(cams, pair)
-        pose, std = fuse(net, self.calibration.net_sigmas(net_std, cams), geo, geo_std)
-        has_geo = np.isfinite(geo[:, :2]).all(1)
-        margin = self.calibration.floor_margin_m
-        outside = ~(_near_floor(net[:, :2], self.site, margin) & np.where(has_geo, _near_floor(np.nan_to_num(geo[:, :2]), self.site, margin), True))
-        source = np.where(~has_geo, "onnx", np.where(outside, "analytic", "hybrid"))
-        pose = np.where((source == "onnx")[:, None], net, np.where((source == "analytic")[:, None], geo, pose))
-        std = np.where((source == "onnx")[:, None], net_std, np.where((source == "analytic")[:, None], geo_std, std))
+        pose, std, source = combine(net, net_std, geo, pair, np.array([len(v) for v in view_sets]), self.calibration, self.site)
         return Estimates(pose, std, tuple(str(s) for s in source))
+
+
+def combine(
+    net: NDArray, net_std: NDArray, geo: NDArray, pair: NDArray, cameras: NDArray, calibration: HybridCalibration, site: Site,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.str_]]:
+    """The hybrid's decision on arrays: the support gate, then the fusion (module docstring).
+
+    Args:
+        net, net_std: (B, 3) the network's poses and calibrated 1-sigmas.
+        geo, pair: (B, 3) the analytic poses, (B,) whether each yaw came from a shoulder/hip pair.
+        cameras: (B,) how many cameras saw each person.
+
+    Returns:
+        (B, 3) poses, (B, 3) 1-sigmas and (B,) sources ("hybrid", "onnx", "analytic").
+    """
+    geo_std = calibration.analytic_sigmas(cameras, pair)
+    pose, std = fuse(net, calibration.net_sigmas(net_std, cameras), geo, geo_std)
+    has_geo = np.isfinite(geo[:, :2]).all(1)
+    m = calibration.floor_margin_m
+    outside = ~(_near_floor(net[:, :2], site, m) & np.where(has_geo, _near_floor(np.nan_to_num(geo[:, :2]), site, m), True))
+    source = np.where(~has_geo, "onnx", np.where(outside, "analytic", "hybrid"))
+    pick = lambda a, b, fused: np.where((source == "onnx")[:, None], a, np.where((source == "analytic")[:, None], b, fused))  # noqa: E731
+    return pick(net, geo, pose), pick(net_std, geo_std, std), source
 
 
 def _near_floor(xy: NDArray, site: Site, margin: float) -> NDArray[np.bool_]:

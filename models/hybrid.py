@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 from superbody.edge.angles import wrap_angle
 from superbody.edge.site import Site
 from superbody.host.estimator import META_STD_SCALE
-from superbody.host.hybrid import META_HYBRID, HybridCalibration, _near_floor, fuse
+from superbody.host.hybrid import META_HYBRID, HybridCalibration, combine, fuse
 from superbody.models.samples import Sample
 
 __all__ = ["robust_sigma", "fit_std_scale", "scaled_std", "fit_trust", "TRUST_GRID", "fit_analytic", "hybrid_poses", "leave_one_fold_out", "sigma_coverage", "write_calibration"]
@@ -111,20 +111,8 @@ def fit_analytic(analytic: NDArray, pair: NDArray, truth: NDArray, cameras: NDAr
 def hybrid_poses(
     net: NDArray, net_std: NDArray, analytic: NDArray, pair: NDArray, cameras: NDArray, calibration: HybridCalibration, site: Site,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.str_]]:
-    """What ``host.hybrid.HybridEstimator`` does, on arrays (for offline scoring).
-
-    Returns:
-        (N, 3) poses, (N, 3) sigmas and (N,) sources.
-    """
-    geo_std = calibration.analytic_sigmas(cameras, pair)
-    pose, std = fuse(net, calibration.net_sigmas(net_std, cameras), analytic, geo_std)
-    has_geo = np.isfinite(analytic[:, :2]).all(1)
-    m = calibration.floor_margin_m
-    outside = ~(_near_floor(net[:, :2], site, m) & np.where(has_geo, _near_floor(np.nan_to_num(analytic[:, :2]), site, m), True))
-    source = np.where(~has_geo, "onnx", np.where(outside, "analytic", "hybrid"))
-    pose = np.where((source == "onnx")[:, None], net, np.where((source == "analytic")[:, None], analytic, pose))
-    std = np.where((source == "onnx")[:, None], net_std, np.where((source == "analytic")[:, None], geo_std, std))
-    return pose, std, source
+    """What ``host.hybrid.HybridEstimator`` does, on arrays (for offline scoring): ``host.hybrid.combine``."""
+    return combine(net, net_std, analytic, pair, cameras, calibration, site)
 
 
 TRUST_GRID: Final[tuple[float, ...]] = (0.0, 0.1, 0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 5.0, 10.0)
