@@ -47,6 +47,8 @@ __all__ = [
     "skeleton",
     "render_views",
     "SimCamera",
+    "FACING_VISIBILITY",
+    "facing_factor",
 ]
 
 # Lateral (left-positive), forward and height offsets of each joint for a 1.75 m person
@@ -56,8 +58,53 @@ _FORWARD: Final = np.array([0.1, 0.075, 0.075, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
 _HEIGHT: Final = np.asarray(body.TYPICAL_HEIGHT_M)
 _LEFT: Final = np.array([i for i, n in enumerate(body.KEYPOINTS) if n.startswith("left_")])
 _RIGHT: Final = np.array([body.MIRROR[i] for i in _LEFT])
-_FACE: Final = np.array([0, 1, 2])
 _PERSON_RADIUS_M: Final = 0.2
+
+# How often a real detector reports each joint by where the person faces, relative to its
+# average over all directions: measured on WheresTheFellow's dev.json (500 views; the truth's
+# yaw against the direction to the camera, 8 bins of 45 degrees centred on -157.5 ... 157.5;
+# each view counted twice, as itself and mirrored left-right, so the table is symmetric).
+# `python scripts/sim_vs_dataset.py` prints it again. From the back the nose and eyes vanish
+# but the ears stay; side-on the far eye, ear, elbow and wrist are hidden.
+FACING_VISIBILITY: Final[tuple[tuple[float, ...], ...]] = (
+    (0.01, 1.28, 1.55, 1.47, 1.47, 1.55, 1.28, 0.01),  # nose
+    (0.04, 2.10, 2.26, 2.07, 1.90, 0.34, 0.00, 0.00),  # left_eye
+    (0.00, 0.00, 0.34, 1.90, 2.07, 2.26, 2.10, 0.04),  # right_eye
+    (1.47, 1.81, 1.64, 0.89, 0.73, 0.00, 0.06, 1.18),  # left_ear
+    (1.18, 0.06, 0.00, 0.73, 0.89, 1.64, 1.81, 1.47),  # right_ear
+    (1.10, 1.10, 0.97, 1.01, 0.92, 0.86, 1.09, 0.94),  # left_shoulder
+    (0.94, 1.09, 0.86, 0.92, 1.01, 0.97, 1.10, 1.10),  # right_shoulder
+    (1.35, 1.41, 1.24, 1.31, 1.18, 0.23, 0.10, 1.09),  # left_elbow
+    (1.09, 0.10, 0.23, 1.18, 1.31, 1.24, 1.41, 1.35),  # right_elbow
+    (0.85, 1.64, 1.57, 1.71, 1.56, 0.24, 0.02, 0.65),  # left_wrist
+    (0.65, 0.02, 0.24, 1.56, 1.71, 1.57, 1.64, 0.85),  # right_wrist
+    (1.01, 1.08, 0.97, 1.04, 1.02, 0.97, 1.00, 0.94),  # left_hip
+    (0.94, 1.00, 0.97, 1.02, 1.04, 0.97, 1.08, 1.01),  # right_hip
+    (1.02, 1.07, 0.98, 1.08, 1.05, 0.90, 0.99, 0.94),  # left_knee
+    (0.94, 0.99, 0.90, 1.05, 1.08, 0.98, 1.07, 1.02),  # right_knee
+    (0.98, 0.98, 1.00, 1.14, 1.10, 0.97, 0.96, 0.91),  # left_ankle
+    (0.91, 0.96, 0.97, 1.10, 1.14, 1.00, 0.98, 0.98),  # right_ankle
+)
+
+
+def facing_factor(table: tuple[tuple[float, ...], ...] | NDArray, rel: float) -> NDArray[np.float64]:
+    """(17,) factors of a facing-visibility table (17, K) at a relative facing angle.
+
+    Args:
+        table: per joint, K factors at angles -pi + (k + 0.5) 2 pi / K (``FACING_VISIBILITY``).
+        rel: the person's facing relative to the direction from them to the camera, radians
+            (0: facing the camera; positive: turned counter-clockwise, the camera sees the
+            person's right side).
+
+    Returns:
+        (17,) factors, linearly interpolated around the circle.
+    """
+    t = np.asarray(table, dtype=np.float64)
+    k = t.shape[1]
+    u = (rel + math.pi) / (2 * math.pi / k) - 0.5
+    k0 = math.floor(u)
+    f = u - k0
+    return (1.0 - f) * t[:, k0 % k] + f * t[:, (k0 + 1) % k]
 
 
 @dataclass(frozen=True)
@@ -73,8 +120,10 @@ class NoiseModel:
         joint_rate: per-joint probability (COCO order) that a clearly visible joint is reported.
         view_quality_std: std of a detection-probability change shared by all joints of a view
             (blur, lighting, pose): views are good or bad as a whole.
-        far_side_drop: detection probability lost by joints on the side turned away.
-        face_away_drop: detection probability lost by the face when the person faces away.
+        facing_visibility: per joint (COCO order), the factor on its detection probability by
+            where the person faces relative to the camera, at 8 angles 45 degrees apart from
+            -157.5 (the camera behind the person's right shoulder) through 0 (facing the camera)
+            to 157.5, interpolated between; ``None``: the same in every direction.
         distance_drop: detection probability lost per metre beyond 3 m.
         border_px: joints within this many pixels of the image border are found less often.
         occluded_keep: probability that a joint hidden by an obstacle or a person is still
@@ -94,8 +143,7 @@ class NoiseModel:
     pixel_noise_px: float = 2.5
     joint_rate: tuple[float, ...] = (0.66, 0.5, 0.5, 0.56, 0.56, 1.0, 1.0, 0.86, 0.86, 0.66, 0.66, 1.0, 1.0, 0.99, 0.99, 0.95, 0.95)
     view_quality_std: float = 0.06
-    far_side_drop: float = 0.15
-    face_away_drop: float = 0.8
+    facing_visibility: tuple[tuple[float, ...], ...] | None = FACING_VISIBILITY
     distance_drop: float = 0.05
     border_px: float = 12.0
     occluded_keep: float = 0.15
@@ -526,16 +574,11 @@ def render_views(
         dist = float(np.linalg.norm(to_person))
         view_dir = to_person / max(dist, 1e-6)
         facing = np.array([math.cos(st.yaw), math.sin(st.yaw)])
-        left = np.array([-facing[1], facing[0]])
-        side = np.zeros(body.NUM_KEYPOINTS)
-        side[_LEFT], side[_RIGHT] = 1.0, -1.0
-        # Joints on the side turned away from the camera are partly hidden by the torso.
-        turned = float(left @ view_dir)
-        p *= 1.0 - noise.far_side_drop * (side * turned > 0.25) * abs(turned)
-        # Seen from behind, the face is not seen.
-        away = float(facing @ view_dir)
-        if away > 0:
-            p[_FACE] *= 1.0 - noise.face_away_drop * away
+        if noise.facing_visibility is not None:
+            # The face needs the person to face the camera (ears show from the side and back);
+            # the arm on the far side is hidden by the torso.
+            rel = math.atan2(-view_dir[0] * facing[1] + view_dir[1] * facing[0], -float(view_dir @ facing))
+            p = np.clip(p * facing_factor(noise.facing_visibility, rel), 0.0, 1.0)
         p *= max(0.0, 1.0 - noise.distance_drop * max(0.0, dist - 3.0))
         edge_px = np.minimum.reduce([uv[:, 0], cam.width - uv[:, 0], uv[:, 1], cam.height - uv[:, 1]])
         p *= 1.0 - 0.5 * np.clip((noise.border_px - edge_px) / max(noise.border_px, 1e-6), 0.0, 1.0)

@@ -5,14 +5,18 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from tqdm import tqdm
 
 from superbody.edge import body
 from superbody.edge.simulator import NoiseModel, SimCamera, World
-from superbody.edge.site import load_site
+from superbody.edge.site import Site, load_site
 
-__all__ = ["statistics", "simulate"]
+__all__ = ["statistics", "simulate", "facing_rates", "FACING_BINS"]
+
+FACING_BINS = 8
 
 
 def statistics(samples: list[dict]) -> dict:
@@ -37,8 +41,39 @@ def statistics(samples: list[dict]) -> dict:
     }
 
 
-def simulate(site_path: str, seconds: float, seed: int, rate_hz: float, noise: NoiseModel = NoiseModel(), progress: bool = True) -> list[dict]:
-    """One simulated person seen by the site's cameras at ``rate_hz``; instants with no view are left out."""
+def facing_rates(samples: list[dict], truths: list, site: Site, bins: int = FACING_BINS) -> tuple[np.ndarray, np.ndarray]:
+    """How often each joint is reported by where the person faces relative to the camera.
+
+    Args:
+        samples: {camera id: (17, 3) keypoints} per instant, one person.
+        truths: (x, y, yaw) of that person per instant.
+        site: the cameras.
+        bins: angle bins centred on -pi + (k + 0.5) 2 pi / bins (0: facing the camera).
+
+    Returns:
+        ``(rates, counts)``: (17, bins) share of views reporting each joint, and (bins,) views
+        per bin; every view is counted twice, as itself and mirrored left-right, so the table is
+        symmetric (``edge.simulator.FACING_VISIBILITY`` is it divided by its mean per joint).
+    """
+    rel, vis = [], []
+    for s, (x, y, yaw) in zip(samples, truths):
+        for cam_id, kp in s.items():
+            c = site.camera(cam_id).t
+            rel.append(math.remainder(yaw - math.atan2(c[1] - y, c[0] - x), 2 * math.pi))
+            vis.append(~np.isnan(kp[:, 0]))
+    mirror = np.asarray(body.MIRROR)
+    r = np.concatenate([np.asarray(rel), -np.asarray(rel)])
+    v = np.concatenate([np.asarray(vis, float).reshape(-1, body.NUM_KEYPOINTS), np.asarray(vis, float).reshape(-1, body.NUM_KEYPOINTS)[:, mirror]])
+    b = np.floor((r + math.pi) / (2 * math.pi / bins)).astype(int) % bins
+    counts = np.bincount(b, minlength=bins)
+    rates = np.array([v[b == k].mean(0) if counts[k] else np.full(body.NUM_KEYPOINTS, np.nan) for k in range(bins)]).T
+    return rates, counts
+
+
+def simulate(site_path: str, seconds: float, seed: int, rate_hz: float, noise: NoiseModel = NoiseModel(), progress: bool = True,
+             truths: list | None = None) -> list[dict]:
+    """One simulated person seen by the site's cameras at ``rate_hz``; instants with no view are
+    left out. ``truths``, if given, receives the person's (x, y, yaw) at each kept instant."""
     site = load_site(site_path)
     world = World(site, 1, seed)
     cams = [SimCamera(world, c, noise) for c in site.camera_ids]
@@ -54,4 +89,7 @@ def simulate(site_path: str, seconds: float, seed: int, rate_hz: float, noise: N
                     s[cam.camera.id] = v.keypoints
         if s:
             out.append(s)
+            if truths is not None:
+                st = world.states(t_ns * 1e-9)[0]
+                truths.append((st.x, st.y, st.yaw))
     return out

@@ -13,13 +13,16 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+
+import numpy as np
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from superbody.edge import body  # noqa: E402
-from superbody.models.simstats import simulate, statistics  # noqa: E402
+from superbody.edge.site import load_site  # noqa: E402
+from superbody.models.simstats import facing_rates, simulate, statistics  # noqa: E402
 from superbody.models.wtf import load_wtf  # noqa: E402
 
 
@@ -28,10 +31,12 @@ def _row(name: str, a: float, b: float, fmt: str = "{:.3f}") -> str:
 
 
 def main(dataset: str, site: str, seconds: float, seed: int, json_out: str | None) -> int:
-    real = [{c: v.keypoints for c, v in s.views.items()} for s in load_wtf(dataset)]
-    ts = [s.stamp_ns for s in load_wtf(dataset)]
+    loaded = load_wtf(dataset)
+    real = [{c: v.keypoints for c, v in s.views.items()} for s in loaded]
+    ts = [s.stamp_ns for s in loaded]
     rate = (len(ts) - 1) / ((ts[-1] - ts[0]) * 1e-9)
-    sim = simulate(site, seconds, seed, rate)
+    sim_truth: list = []
+    sim = simulate(site, seconds, seed, rate, truths=sim_truth)
     a, b = statistics(real), statistics(sim)
     print(f"{'':28}{'dev.json':>12}{'simulator':>12}")
     print(_row("samples", a["samples"], b["samples"], "{:.0f}"))
@@ -49,6 +54,20 @@ def main(dataset: str, site: str, seconds: float, seed: int, json_out: str | Non
     print("  detection rate per joint:")
     for name in body.KEYPOINTS:
         print(_row(f"  {name}", a["joint_rate"][name], b["joint_rate"][name], "{:.2f}"))
+    st = load_site(site)
+    ra, ca = facing_rates(real, [s.truth for s in loaded], st)
+    rb, cb = facing_rates(sim, sim_truth, st)
+    a["facing_rates"], b["facing_rates"] = ra.tolist(), rb.tolist()
+    print("  detection rate by where the person faces (0 = facing the camera), dev.json / simulator:")
+    centres = np.degrees(-np.pi + (np.arange(ra.shape[1]) + 0.5) * 2 * np.pi / ra.shape[1])
+    print("  " + " " * 16 + "".join(f"{c:>11.0f}" for c in centres))
+    print("  " + "views".ljust(16) + "".join(f"{x:>5d}/{y:<5d}" for x, y in zip(ca, cb)))
+    for j, name in enumerate(body.KEYPOINTS):
+        print("  " + name.ljust(16) + "".join(f"{x:>5.2f}/{y:<5.2f}" for x, y in zip(ra[j], rb[j])))
+    print("  facing-visibility table (dev.json rates over their view-weighted mean, edge.simulator.FACING_VISIBILITY):")
+    norm = ra / (ra @ (ca / ca.sum()))[:, None]
+    for j, name in enumerate(body.KEYPOINTS):
+        print("    (" + ", ".join(f"{x:.2f}" for x in norm[j]) + f"),  # {name}")
     if json_out:
         Path(json_out).write_text(json.dumps({"dev": a, "sim": b}, indent=1))
     return 0

@@ -133,7 +133,7 @@ def test_obstacle_hides_joints_behind_it(site):
     states, apps = _one_person_at(site, 4.1, 4.6, 0.0)
     cam = site.camera("ne")
     noise = NoiseModel(occluded_keep=0.0, joint_rate=(1.0,) * 17, view_quality_std=0.0, view_miss_prob=0.0,
-                       truncated_miss_prob=0.0, far_side_drop=0.0, face_away_drop=0.0)
+                       truncated_miss_prob=0.0, facing_visibility=None)
     seen = render_views(states, apps, cam, np.random.default_rng(0), noise, site)
     free = render_views(states, apps, cam, np.random.default_rng(0), noise, None)
     assert free and free[0][1].num_visible > (seen[0][1].num_visible if seen else 0)

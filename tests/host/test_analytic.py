@@ -22,7 +22,7 @@ def test_triangulate_exact_rays():
 
 
 CLEAN = NoiseModel(pixel_noise_px=0.0, joint_rate=(1.0,) * 17, view_quality_std=0.0, view_miss_prob=0.0,
-                   truncated_miss_prob=0.0, swap_prob=0.0, spurious_prob=0.0, far_side_drop=0.0, face_away_drop=0.0,
+                   truncated_miss_prob=0.0, swap_prob=0.0, spurious_prob=0.0, facing_visibility=None,
                    occluded_keep=1.0)
 
 

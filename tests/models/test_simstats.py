@@ -2,16 +2,47 @@
 
 import pytest
 
-from superbody.models.simstats import simulate, statistics
+import numpy as np
+
+from superbody.edge import body
+from superbody.edge.site import load_site
+from superbody.models.simstats import facing_rates, simulate, statistics
 from superbody.models.wtf import load_wtf
 from tests.conftest import WTF_SITE
 
 
 @pytest.fixture(scope="module")
-def both(dev_json):
-    real = statistics([{c: v.keypoints for c, v in s.views.items()} for s in load_wtf(dev_json)])
-    sim = statistics(simulate(str(WTF_SITE), seconds=120, seed=3, rate_hz=8.0, progress=False))
-    return real, sim
+def runs(dev_json):
+    loaded = load_wtf(dev_json)
+    real = [{c: v.keypoints for c, v in s.views.items()} for s in loaded]
+    truths: list = []
+    sim = simulate(str(WTF_SITE), seconds=120, seed=3, rate_hz=8.0, progress=False, truths=truths)
+    return (real, [s.truth for s in loaded]), (sim, truths)
+
+
+@pytest.fixture(scope="module")
+def both(runs):
+    (real, _), (sim, _) = runs
+    return statistics(real), statistics(sim)
+
+
+def test_which_joints_show_depends_on_where_the_person_faces_as_in_the_real_file(runs):
+    """From behind the nose and eyes vanish but the ears stay; side-on the far eye, ear, elbow
+    and wrist are hidden: the cues a single camera has for front and back."""
+    site = load_site(WTF_SITE)
+    (real, rt), (sim, st) = runs
+    r, _ = facing_rates(real, rt, site)
+    s, counts = facing_rates(sim, st, site)
+    assert counts.min() > 50
+    k = body.KEYPOINTS.index
+    cue_rows = [k("nose"), k("left_eye"), k("right_eye"), k("left_ear"), k("right_ear"), k("left_elbow"), k("right_elbow"), k("left_wrist"), k("right_wrist")]
+    assert np.abs(s[cue_rows] - r[cue_rows]).max() < 0.35
+    back, front = [0, -1], [3, 4]  # bins centred on +-157.5 and +-22.5 degrees
+    assert s[k("nose"), back].max() < 0.15 < 0.5 < s[k("nose"), front].min()
+    assert s[k("left_ear"), back].min() > 0.3
+    right_side = 6  # 112.5 degrees: the camera sees the person's right side
+    assert s[k("left_eye"), right_side] < 0.1 < 0.4 < s[k("right_eye"), right_side]
+    assert s[k("left_elbow"), right_side] < 0.35 < 0.7 < s[k("right_elbow"), right_side]
 
 
 def test_joints_per_view_and_scores_match(both):
