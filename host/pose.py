@@ -465,11 +465,14 @@ def _wire_cov(cov: Any, path: str) -> list:
     c = np.asarray(cov, dtype=np.float64)
     if c.shape != (3, 3):
         raise ValueError(f"cannot encode poses: {path} must have shape (3, 3), has {c.shape}")
-    if np.isfinite(c).all():
+    finite = np.isfinite(c)
+    if finite.all():
         # Filters leave float noise of ~1e-16 of the largest entry; a real asymmetry is a bug.
         if not np.allclose(c, c.T, rtol=0, atol=1e-9 * float(np.abs(c).max()) + 1e-15):
             raise ValueError(f"cannot encode poses: {path} must be symmetric, got {c.tolist()}")
         c = (c + c.T) / 2
+    elif (finite != finite.T).any():  # a NaN below the diagonal only is an asymmetry too, not one to drop
+        raise ValueError(f"cannot encode poses: {path} must be symmetric, got {c.tolist()}")
     # 6 significant digits; NaN and inf pass through for validation to name.
     return [float(f"{v:.6g}") for v in c[_TRIU].tolist()]
 
@@ -510,8 +513,11 @@ def _ints_in(values: list, lo: int, hi: int) -> list[int] | None:
 
 
 def _names_ok(names: list[str]) -> bool:
-    """Every entry a camera id (one regex call for all of them)."""
-    return bool(_NAMES_RE.fullmatch("\x00".join(names) + "\x00")) if names else True
+    """Every entry a camera id: one regex call for all of them, joined by NUL (which no id holds)."""
+    if not names:
+        return True
+    text = "\x00".join(names)  # a non-string raises TypeError
+    return text.count("\x00") == len(names) - 1 and bool(_NAMES_RE.fullmatch(text + "\x00"))
 
 
 def _estimator_ok(value: Any) -> bool:

@@ -169,6 +169,13 @@ def test_observation_typed_encoder_agrees_with_checked_encoder(obs: Observation)
 def _broken_pose_arrays(draw: st.DrawFn) -> PoseArray:
     """A valid PoseArray, then one value of one person changed to an odd one (or none changed)."""
     poses = draw(tp.pose_arrays())
+    if draw(st.integers(0, 4)) == 0:  # a top-level field
+        field = draw(st.sampled_from(["site", "seq", "latency_ns", "cameras_alive", "estimator"]))
+        value = draw(st.sampled_from({
+            "site": ["lab/1", "", "lab\n", 5], "seq": [-1, 2**63, 1.5, True, np.int64(3)], "latency_ns": [-5, None, np.uint64(7)],
+            "cameras_alive": [("a", "a"), ("a\x00b",), "cam", ["1"], ("y",) * 65], "estimator": ["", "x" * 129, "\t", 3],
+        }[field]))
+        return PoseArray(**{**poses.__dict__, field: value})
     if not poses.people or draw(st.integers(0, 4)) == 0:
         return poses
     i = draw(st.integers(0, len(poses.people) - 1))
@@ -181,7 +188,7 @@ def _broken_pose_arrays(draw: st.DrawFn) -> PoseArray:
     elif field in ("views", "id"):
         value = draw(st.sampled_from([-1, 256, 2**53, True, 1.0, None]))
     elif field == "cameras":
-        value = draw(st.sampled_from([("a", "a"), ("a b",), "cam-1", ("x",) * 65, ()]))
+        value = draw(st.sampled_from([("a", "a"), ("a b",), ("a\x00b",), ("a", ""), "cam-1", ("x",) * 65, (), ["1", "2"]]))
     elif field == "estimator":
         value = draw(st.sampled_from(["", "x" * 129, "caf\u00e9", "a\nb", None]))
     else:
@@ -199,3 +206,14 @@ def test_pose_typed_encoder_agrees_with_checked_encoder(poses: PoseArray) -> Non
     if fast is not None:
         back = pose_msg._pose_array(parse_json(fast, pose_msg.MAX_PAYLOAD_BYTES), None)
         tp.assert_close(back, pose_msg.decode(slow))  # the same up to the last rounded digit (ties)
+
+
+def test_pose_encode_refuses_a_nan_below_the_diagonal_only() -> None:
+    """The checked encoder used to send the upper triangle and drop it; both paths now refuse it."""
+    p = tp.make_poses(1).people[0]
+    cov = p.cov.copy()
+    cov[1, 0] = math.nan
+    poses = PoseArray("lab", 1, tp.STAMP, (PersonPose(**{**p.__dict__, "cov": cov}),))
+    assert pose_msg._typed_encode(poses) is None
+    with pytest.raises(ValueError, match=r"people\[0\]\.cov must be symmetric"):
+        pose_msg.encode(poses)
