@@ -2,20 +2,29 @@
 
 The schema, for subscribers in any language, is in ``docs/pose-schema.md``. In short::
 
-    {"schema": "superbody.people", "version": 1, "site": "lab", "seq": 42,
+    {"schema": "superbody.people", "version": 2, "site": "lab", "seq": 42,
      "stamp_ns": 1718000000000000000, "latency_ns": 2100000, "estimator": "analytic",
      "cameras_alive": ["cam-1", "cam-2"],
      "people": [{"id": 3, "x": 1.234, "y": -0.5, "yaw": 1.5708,          # m, m, rad (REP-103)
                  "vx": 0.41, "vy": 0.0, "yaw_rate": 0.0123,              # m/s, m/s, rad/s
                  "cov": [xx, xy, xyaw, yy, yyaw, yawyaw],                # upper triangle
                  "confidence": 0.93, "views": 2, "cameras": ["cam-1", "cam-2"],
-                 "stamp_ns": 1717999999990000000}]}
+                 "stamp_ns": 1717999999990000000, "estimator": "hybrid"}]}
 
 ``encode`` rounds positions to 1 mm, velocities to 1 mm/s, angles and angular rates to 1e-4,
 confidence to 1e-4 and covariances to 6 significant digits, so a person is about 250 bytes.
 ``decode`` checks every field and raises ``PoseDecodeError`` naming the field
 (``people[2].cov[3]``), a ``reason`` from ``REASONS`` for reject counters, and the allowed range;
 the checks shared with the Observation codec are in ``edge/payload.py``.
+
+How (as in ``edge/wire.py``): the message is defined as msgspec structs (``PoseArrayMsg``,
+``PersonPoseMsg``, and their version 1 forms), which carry every rule a JSON Schema can state and
+from which ``docs/schemas/people.schema.json`` is generated. A payload the reference encoder
+could have written (ASCII, no escapes) is decoded by msgspec in one pass, then checked for what a
+type cannot state (distinct ids and camera ids, views against cameras, no repeated key). What
+fails goes to the rule-by-rule validator (``_pose_array``), which names the first violation.
+``encode`` checks the in-memory values vectorised, on the rounded values it sends, and writes the
+structs; on a failed check the validator names the field.
 """
 
 from __future__ import annotations
