@@ -48,6 +48,7 @@ test: $(VENV)/.dev-installed $(BLAZEPOSE_VENV)/.installed
 	$(PY) -m pytest -q $(ARGS)
 
 bench: $(VENV)/.dev-installed
+	$(PY) benchmarks/codec_bench.py
 	$(PY) benchmarks/model_bench.py
 	$(PY) benchmarks/host_bench.py --zenoh
 

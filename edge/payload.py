@@ -33,8 +33,11 @@ __all__ = [
     "check_array",
     "check_array_max",
     "as_int",
+    "NAME_PATTERN",
+    "typed_input",
 ]
 
+NAME_PATTERN: Final[str] = NAME_RE.pattern  # for the typed message definitions and their JSON Schemas
 ROOT: Final[str] = "$"  # the field named by errors about the payload as a whole
 MAX_INT63: Final[int] = 2**63 - 1  # sequence numbers and nanosecond stamps
 
@@ -180,6 +183,29 @@ def parse_json(payload: Any, max_bytes: int) -> Any:
         fail(ROOT, "not_json", "is nested too deeply to parse")
     except ValueError as e:  # e.g. an integer literal longer than Python's 4300-digit limit
         fail(ROOT, "not_json", f"is not parseable JSON ({str(e)[:80]})")
+
+
+def typed_input(payload: Any, max_bytes: int) -> bytes | None:
+    """The payload as bytes if a codec's typed decoder may take it on its own, else None.
+
+    The typed decoders (msgspec) take what the reference encoders write: at most ``max_bytes``,
+    pure ASCII, no backslash. With no escapes every ``"`` in valid JSON opens or closes a
+    string, so a codec can rule out duplicate keys by counting quotes (msgspec keeps the last
+    of two equal keys silently), and no string can hide a control character. Anything else
+    (non-ASCII names, escapes, non-bytes) goes to the rule-by-rule validator, which decides
+    exactly and names the field.
+    """
+    if type(payload) is bytes:
+        data = payload
+    elif isinstance(payload, (bytes, bytearray, memoryview)):
+        data = bytes(payload)
+    elif hasattr(payload, "to_bytes") and hasattr(payload, "__len__"):  # zenoh.ZBytes
+        data = payload.to_bytes()
+    else:
+        return None
+    if len(data) > max_bytes or not data.isascii() or b"\\" in data:
+        return None
+    return data
 
 
 # --- validation ----------------------------------------------------------------------------

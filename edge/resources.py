@@ -1,11 +1,12 @@
-"""The files shipped inside the package: the site files and the models.
+"""The files shipped inside the package: the site files, the models and the message schemas.
 
 Every default path goes through here, so that it works the same from a checkout (editable
 install) and from an installed wheel. The repository layout stays the one source: the site files
 live in ``deploy/sites/`` and install as the data package ``superbody.sites`` (a setuptools
 ``package-dir`` mapping, no copy; its ``__init__.py`` makes it a regular package, which the
 editable install's finder needs), the models live in ``models/`` and are package data of
-``superbody.models``.
+``superbody.models``, and the JSON Schemas live in ``docs/schemas/`` and install the same way as
+``superbody.schemas``.
 """
 
 from __future__ import annotations
@@ -19,11 +20,13 @@ __all__ = ["DEFAULT_SITE", "MESSAGES", "site_path", "shipped_sites", "model_path
 SITES_PACKAGE = "superbody.sites"
 MODELS_PACKAGE = "superbody.models"
 DEFAULT_SITE = "wtf-apartment"  # the paper's apartment: the demo's and the tools' default
-# Message name -> (package, JSON Schema file beside its codec).
+SCHEMAS_PACKAGE = "superbody.schemas"
+# Message name -> its JSON Schema in docs/schemas/, generated from the message's type by
+# superbody.host.schemas: edge.wire.ObservationMsg, host.pose.PoseArrayMsg, host.status.HostStatus.
 MESSAGES = {
-    "observation": ("superbody.edge", "observation.schema.json"),  # edge/wire.py
-    "people": ("superbody.host", "people.schema.json"),  # host/pose.py
-    "status": ("superbody.host", "status.schema.json"),  # host/aggregator.py
+    "observation": (SCHEMAS_PACKAGE, "observation.schema.json"),
+    "people": (SCHEMAS_PACKAGE, "people.schema.json"),
+    "status": (SCHEMAS_PACKAGE, "status.schema.json"),
 }
 
 

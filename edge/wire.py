@@ -15,15 +15,31 @@ naming the field (``people[2].keypoints[5][1]``), a ``reason`` from ``REASONS`` 
 counters, and the allowed range. Numeric arrays are checked with numpy; the error still names
 the first offending element. The checks every superbody codec shares, and ``DecodeError``
 itself, are in ``edge/payload.py``.
+
+How: the message is defined as typed structs (``ObservationMsg``, ``PersonMsg``,
+``HistogramMsg``: msgspec), which carry every rule a JSON Schema can state (types, lengths,
+ranges, name patterns) and from which ``docs/schemas/observation.schema.json`` is generated. A
+payload the reference encoder could have written (ASCII, no escapes) is decoded by msgspec in
+one pass; the rules a type cannot state (pixels within the image, box order, histogram sum,
+scores that stay positive in float32, no repeated key) are then checked on the typed values,
+all people at once with numpy. A payload that fails any of that, or that the typed decoder does
+not take, goes to the rule-by-rule validator (``_observation``), which finds the first
+violation and names it: errors are the documented ones, and only invalid traffic pays for them.
+``encode`` checks the in-memory values the same way (vectorised, on the rounded values it
+sends) and writes the structs with msgspec; on a failed check, the validator names the field.
 """
 
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, Final
+from itertools import chain
+from typing import TYPE_CHECKING, Annotated, Any, Final, Literal
 
+import msgspec
 import numpy as np
+from msgspec import UNSET, Meta, Struct, UnsetType
 from numpy.typing import NDArray
 
 from superbody.edge.body import NUM_KEYPOINTS
@@ -31,6 +47,7 @@ from superbody.edge.colour import HIST_BINS
 from superbody.edge.observation import Observation, PersonView
 from superbody.edge.payload import (
     MAX_INT63,
+    NAME_PATTERN,
     REASONS,
     DecodeError,
     Reason,
@@ -45,7 +62,9 @@ from superbody.edge.payload import (
     check_object,
     fail,
     parse_json,
+    typed_input,
 )
+from superbody.edge.site import NAME_RE
 
 if TYPE_CHECKING:
     import zenoh
@@ -59,6 +78,9 @@ __all__ = [
     "REASONS",
     "Reason",
     "DecodeError",
+    "HistogramMsg",
+    "PersonMsg",
+    "ObservationMsg",
     "encode",
     "decode",
     "zenoh_encoding",
@@ -84,6 +106,117 @@ _HIST_SUM_TOL: Final[float] = 1e-2
 _MIN_SCORE: Final[float] = 1e-5  # the score resolution on the wire
 _SCORE_OPEN: Final = np.array([False, False, True])  # u, v closed below; score > 0
 _NUMBER: Final[frozenset[type]] = frozenset({int, float})
+
+
+# --- the message as types ------------------------------------------------------------------
+# Every rule a JSON Schema can state lives here; the rest is in _typed_checks.
+
+_Name = Annotated[str, Meta(pattern=NAME_PATTERN, description="1-64 characters of A-Z a-z 0-9 _ - (a Zenoh key chunk)")]
+_Count = Annotated[int, Meta(ge=0, le=MAX_INT63)]
+_ImageSide = Annotated[int, Meta(ge=_IMAGE_MIN, le=_IMAGE_MAX)]
+# The bounds that hold for any image; the decoder checks [-W, 2W] and [-H, 2H] of this image.
+_Pixel = Annotated[float, Meta(ge=-_IMAGE_MAX, le=2 * _IMAGE_MAX)]
+_Score = Annotated[float, Meta(gt=0.0, le=1.0)]
+_Fraction = Annotated[float, Meta(ge=0.0, le=1.0)]
+_Metre = Annotated[float, Meta(ge=-_MAX_COORD_M, le=_MAX_COORD_M)]
+_BinCount = Annotated[int, Meta(ge=1, le=1024)]
+_JOINTS = Meta(min_length=NUM_KEYPOINTS, max_length=NUM_KEYPOINTS,
+               description="COCO-17 order; null for a joint not detected (no depth, for points3d)")
+
+
+class HistogramMsg(Struct, forbid_unknown_fields=True, kw_only=True):
+    """OpenCV HSV hue x saturation histogram: values[8*h + s], summing to 0 or to 1 +- 0.01 (checked by the decoder)."""
+
+    bins: Annotated[tuple[_BinCount, _BinCount], Meta(extra_json_schema={"const": list(HIST_BINS)})]
+    values: Annotated[list[_Fraction], Meta(min_length=_HIST_SIZE, max_length=_HIST_SIZE)]
+
+
+class PersonMsg(Struct, forbid_unknown_fields=True, kw_only=True):
+    """One person in one frame. keypoints and bbox in pixels within [-W, 2W] x [-H, 2H] of the image,
+    x0 <= x1 and y0 <= y1 (checked by the decoder); points3d in metres, camera frame (optional)."""
+
+    keypoints: Annotated[list[tuple[_Pixel, _Pixel, _Score] | None], _JOINTS]
+    bbox: tuple[_Pixel, _Pixel, _Pixel, _Pixel]
+    histogram: HistogramMsg
+    points3d: Annotated[list[tuple[_Metre, _Metre, _Metre] | None], _JOINTS] | None | UnsetType = UNSET
+
+
+class ObservationMsg(Struct, forbid_unknown_fields=True, kw_only=True):
+    """One camera frame: the people a camera's 2D pose detector saw (docs/observation-schema.md)."""
+
+    schema: Literal["superbody.observation"]
+    version: Literal[1]
+    site: _Name
+    camera: _Name
+    seq: _Count
+    stamp_ns: _Count
+    image: tuple[_ImageSide, _ImageSide]
+    people: Annotated[list[PersonMsg], Meta(max_length=MAX_PEOPLE)]
+
+
+_DECODER: Final = msgspec.json.Decoder(ObservationMsg)  # strict: no bool for a number, no float for an integer
+_ENCODER: Final = msgspec.json.Encoder()
+_NAN3: Final = (math.nan, math.nan, math.nan)
+_chain: Final = chain.from_iterable
+# The JSON strings of a valid message: 8 keys and 3 values at the top, 5 keys a person (+1 with a points3d key).
+_TOP_STRINGS, _PERSON_STRINGS = 11, 5
+
+
+def _typed_decode(data: bytes, expected_site: str | None) -> Observation | None:
+    """The Observation if ``data`` passes every rule, else None (the validator then names the violation)."""
+    try:
+        msg = _DECODER.decode(data)
+    except (msgspec.ValidationError, msgspec.DecodeError):
+        return None
+    people = msg.people
+    n = len(people)
+    keys_3d = sum(p.points3d is not UNSET for p in people)  # "points3d": null counts too
+    if data.count(b'"') != 2 * (_TOP_STRINGS + _PERSON_STRINGS * n + keys_3d):
+        return None  # a repeated key (typed_input ruled out escapes)
+    if expected_site is not None and msg.site != expected_site:
+        fail("site", "site", f"must be {expected_site!r} (this subscriber's site), got {msg.site!r}")
+    width, height = msg.image
+    if not n:
+        return Observation(msg.site, msg.camera, msg.seq, msg.stamp_ns, width, height, ())
+
+    # numpy reads a flat iterator of floats faster than nested sequences.
+    rows = [r or _NAN3 for p in people for r in p.keypoints]
+    kp = np.fromiter(_chain(rows), np.float64, 3 * len(rows)).reshape(-1, 3)  # (17n, 3), NaN rows: missing
+    bbox = np.array([p.bbox for p in people])  # (n, 4)
+    hist = np.fromiter(_chain(p.histogram.values for p in people), np.float64, _HIST_SIZE * n).reshape(n, _HIST_SIZE)
+    # Missing joints are NaN rows: every comparison with them is False.
+    u, v = kp[:, 0], kp[:, 1]
+    bx, by = bbox[:, 0::2], bbox[:, 1::2]
+    if ((u < -width) | (u > 2 * width) | (v < -height) | (v > 2 * height)).any() \
+            or ((bx < -width) | (bx > 2 * width) | (by < -height) | (by > 2 * height)).any() \
+            or (bbox[:, 2] < bbox[:, 0]).any() or (bbox[:, 3] < bbox[:, 1]).any():
+        return None
+    if any(p.histogram.bins != HIST_BINS for p in people):
+        return None
+    total = hist.sum(axis=1)
+    if ((total != 0.0) & (np.abs(total - 1.0) > _HIST_SUM_TOL)).any():
+        return None
+    hist /= np.where(total > 0.0, total, 1.0)[:, None]  # hand consumers the documented invariant: sums to 1
+    kp32 = kp.astype(np.float32)
+    if (kp32[:, 2] <= 0.0).any():  # a positive score below float32's range (NaN rows compare False)
+        return None
+
+    kp32 = kp32.reshape(n, NUM_KEYPOINTS, 3)
+    bbox32 = bbox.astype(np.float32)
+    hist32 = hist.astype(np.float32).reshape(n, *HIST_BINS)
+    with_3d = [p for p in people if p.points3d]
+    rows3 = [r or _NAN3 for p in with_3d for r in p.points3d]
+    xyz = iter(np.fromiter(_chain(rows3), np.float64, 3 * len(rows3)).astype(np.float32).reshape(-1, NUM_KEYPOINTS, 3))
+    return Observation(
+        site=msg.site, camera=msg.camera, seq=msg.seq, stamp_ns=msg.stamp_ns, width=width, height=height,
+        people=tuple(
+            PersonView(keypoints=kp32[i], bbox=bbox32[i], histogram=hist32[i], points3d=next(xyz) if p.points3d else None)
+            for i, p in enumerate(people)
+        ),
+    )
+
+
+# --- the rule-by-rule validator: names the first violation ---------------------------------
 
 
 # --- validation: numeric arrays ------------------------------------------------------------
@@ -245,6 +378,11 @@ def decode(payload: bytes | bytearray | memoryview, *, expected_site: str | None
     Raises:
         DecodeError: for any invalid payload; ``field`` names the value, ``reason`` is in ``REASONS``.
     """
+    data = typed_input(payload, MAX_PAYLOAD_BYTES)
+    if data is not None:
+        obs = _typed_decode(data, expected_site)
+        if obs is not None:
+            return obs
     return _observation(parse_json(payload, MAX_PAYLOAD_BYTES), expected_site)
 
 
@@ -284,6 +422,80 @@ def _person_doc(p: PersonView, path: str) -> dict:
     return doc
 
 
+def _int_in(value: Any, lo: int, hi: int) -> int | None:
+    """``value`` as an int if it is an integer (numpy's too, not a bool) in [lo, hi], else None."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        return None
+    value = int(value)
+    return value if lo <= value <= hi else None
+
+
+def _null_rows(a: NDArray[np.float64], missing: NDArray[np.bool_]) -> list:
+    """(P, 17, 3) to nested lists, with the ``missing`` (P, 17) rows as None."""
+    rows = a.tolist()
+    for i, j in zip(*(k.tolist() for k in np.nonzero(missing))):
+        rows[i][j] = None
+    return rows
+
+
+def _typed_encode(obs: Observation) -> bytes | None:
+    """The payload, or None if a value breaks a rule (or is of an odd type): every check runs on
+    the rounded values that are sent, for all people at once. None sends ``encode`` to the
+    validator, which names the field."""
+    site, camera = obs.site, obs.camera
+    if type(site) is not str or type(camera) is not str or not NAME_RE.fullmatch(site) or not NAME_RE.fullmatch(camera):
+        return None
+    seq, stamp_ns = _int_in(obs.seq, 0, MAX_INT63), _int_in(obs.stamp_ns, 0, MAX_INT63)
+    w, h = _int_in(obs.width, _IMAGE_MIN, _IMAGE_MAX), _int_in(obs.height, _IMAGE_MIN, _IMAGE_MAX)
+    people = obs.people
+    n = len(people)
+    if seq is None or stamp_ns is None or w is None or h is None or n > MAX_PEOPLE:
+        return None
+    msg_people: list[PersonMsg] = []
+    if n:
+        kp = np.array([p.keypoints for p in people], dtype=np.float64)  # (n, 17, 3)
+        bbox = np.array([p.bbox for p in people], dtype=np.float64)  # (n, 4)
+        hist = np.array([p.histogram for p in people], dtype=np.float64)  # (n, 16, 8)
+        if kp.shape != (n, NUM_KEYPOINTS, 3) or bbox.shape != (n, 4) or hist.shape != (n, *HIST_BINS):
+            return None
+        wire_kp = np.empty_like(kp)
+        wire_kp[..., :2] = np.round(kp[..., :2], 2)  # 0.01 px
+        score, score_r = kp[..., 2], np.round(kp[..., 2], 5)
+        # 1e-5; a positive score too small for that stays positive rather than becoming invalid.
+        wire_kp[..., 2] = np.where((score > 0) & (score_r < _MIN_SCORE), _MIN_SCORE, score_r)
+        missing = np.isnan(wire_kp).all(axis=2)  # (n, 17)
+        u, v, s = wire_kp[..., 0], wire_kp[..., 1], wire_kp[..., 2]
+        # A NaN or infinity in a present joint fails these comparisons.
+        kp_ok = (u >= -w) & (u <= 2 * w) & (v >= -h) & (v <= 2 * h) & (s > 0) & (s <= 1)
+        wire_bbox = np.round(bbox, 2)
+        bx, by = wire_bbox[:, 0::2], wire_bbox[:, 1::2]
+        wire_hist = np.round(hist.reshape(n, _HIST_SIZE), 5)
+        total = wire_hist.sum(axis=1)
+        if not ((kp_ok | missing).all() and ((bx >= -w) & (bx <= 2 * w) & (by >= -h) & (by <= 2 * h)).all()
+                and (wire_bbox[:, 2] >= wire_bbox[:, 0]).all() and (wire_bbox[:, 3] >= wire_bbox[:, 1]).all()
+                and ((wire_hist >= 0) & (wire_hist <= 1)).all()
+                and ((total == 0.0) | (np.abs(total - 1.0) <= _HIST_SUM_TOL)).all()):
+            return None
+        with_3d = [i for i, p in enumerate(people) if p.points3d is not None]
+        points3d: dict[int, list] = {}
+        if with_3d:
+            p3 = np.round(np.array([people[i].points3d for i in with_3d], dtype=np.float64), 4)  # 0.1 mm
+            if p3.shape != (len(with_3d), NUM_KEYPOINTS, 3):
+                return None
+            missing3 = np.isnan(p3).all(axis=2)
+            if not ((np.abs(p3) <= _MAX_COORD_M).all(axis=2) | missing3).all():
+                return None
+            points3d = dict(zip(with_3d, _null_rows(p3, missing3)))
+        bins = list(HIST_BINS)
+        msg_people = [
+            PersonMsg(keypoints=k, bbox=b, histogram=HistogramMsg(bins=bins, values=hv), points3d=points3d.get(i, UNSET))
+            for i, (k, b, hv) in enumerate(zip(_null_rows(wire_kp, missing), wire_bbox.tolist(), wire_hist.tolist()))
+        ]
+    return _ENCODER.encode(ObservationMsg(
+        schema=SCHEMA, version=VERSION, site=site, camera=camera, seq=seq, stamp_ns=stamp_ns, image=(w, h), people=msg_people,
+    ))
+
+
 def encode(obs: Observation) -> bytes:
     """Serialise an Observation to compact JSON (about 2 KB per person).
 
@@ -294,6 +506,20 @@ def encode(obs: Observation) -> bytes:
         ValueError: the observation would not decode (a value out of range, a NaN inside a
             present joint, a wrong array shape...); the message names the field.
     """
+    try:
+        payload = _typed_encode(obs)
+    except (TypeError, ValueError, OverflowError):  # e.g. an array numpy cannot read as numbers
+        payload = None
+    if payload is None:
+        payload = _checked_encode(obs)
+    if len(payload) > MAX_PAYLOAD_BYTES:
+        raise ValueError(f"cannot encode observation: {len(payload)} bytes, more than the {MAX_PAYLOAD_BYTES} allowed")
+    return payload
+
+
+def _checked_encode(obs: Observation) -> bytes:
+    """The encoder for what ``_typed_encode`` refused: a document checked by the validator, which
+    names the field that breaks a rule (and encodes what only looked odd, e.g. a float subclass)."""
     doc = {
         "schema": SCHEMA,
         "version": VERSION,
@@ -309,10 +535,7 @@ def encode(obs: Observation) -> bytes:
         _observation(doc, None)
     except DecodeError as e:
         raise ValueError(f"cannot encode observation: {e}") from e
-    payload = json.dumps(doc, separators=(",", ":"), allow_nan=False).encode("utf-8")
-    if len(payload) > MAX_PAYLOAD_BYTES:
-        raise ValueError(f"cannot encode observation: {len(payload)} bytes, more than the {MAX_PAYLOAD_BYTES} allowed")
-    return payload
+    return json.dumps(doc, separators=(",", ":"), allow_nan=False).encode("utf-8")
 
 
 def zenoh_encoding() -> zenoh.Encoding:

@@ -13,16 +13,15 @@ Two layers:
   counted and dropped before it is copied, and the queue is bounded in bytes as well as in
   messages), a loop that drains the queue and publishes
   after each batch, camera liveliness, a periodic one-line status, also published as JSON on
-  ``superbody/<site>/host/status``: ``{"cameras_alive": [ids], "cameras_total": n,
-  "people": n, "obs_per_s": f, "latency_ms": {"p50": f, "p99": f}, "rejected": {reason: n},
-  "queue_dropped": n, "published": n}``.
+  ``superbody/<site>/host/status`` (``host.status.HostStatus``): ``{"cameras_alive": [ids],
+  "cameras_total": n, "people": n, "obs_per_s": f, "latency_ms": {"p50": f | null, "p99": f | null},
+  "rejected": {reason: n}, "queue_dropped": n, "published": n}``.
 
 ``superbody host run --site SITE.toml [--model M.onnx | --estimator analytic]``.
 """
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 import threading
@@ -38,6 +37,7 @@ from superbody.edge.clock import WorldClock
 from superbody.edge.observation import PersonView
 from superbody.edge.site import Site
 from superbody.host import pose as pose_msg
+from superbody.host import status as host_status
 from superbody.host.estimator import Estimator, estimate_detailed
 from superbody.host.filter import FilterConfig, PoseFilter
 from superbody.host.tracker import Tracker, TrackerConfig
@@ -357,16 +357,16 @@ def run_host(
             last_pub = time.monotonic()
             if last_pub - last_status >= cfg.status_every_s:
                 p50, p99 = _percentiles(latencies)
-                status = {
-                    "cameras_alive": sorted(aggregator.cameras_alive), "cameras_total": len(site.cameras), "people": len(arr.people),
-                    "obs_per_s": obs_since_status / (last_pub - last_status), "latency_ms": {"p50": p50, "p99": p99},
-                    "rejected": dict(aggregator.rejected), "queue_dropped": counters["queue_dropped"], "published": counters["published"],
-                }
-                status_pub.put(json.dumps(status))
+                status = host_status.HostStatus(
+                    cameras_alive=sorted(aggregator.cameras_alive), cameras_total=len(site.cameras), people=len(arr.people),
+                    obs_per_s=obs_since_status / (last_pub - last_status), latency_ms=host_status.latency(p50, p99),
+                    rejected=dict(aggregator.rejected), queue_dropped=counters["queue_dropped"], published=counters["published"],
+                )
+                status_pub.put(host_status.encode(status))
                 rej = ", ".join(f"{k} {v}" for k, v in sorted(aggregator.rejected.items())) or "none"
                 log.info("cameras alive %d/%d (%s) | people %d | obs/s %.0f | latency p50 %.2f ms p99 %.2f ms | rejected: %s | queue dropped %d",
-                         len(aggregator.cameras_alive), len(site.cameras), ",".join(status["cameras_alive"]) or "-",
-                         len(arr.people), status["obs_per_s"], p50, p99, rej, counters["queue_dropped"])
+                         len(aggregator.cameras_alive), len(site.cameras), ",".join(status.cameras_alive) or "-",
+                         len(arr.people), status.obs_per_s, p50, p99, rej, counters["queue_dropped"])
                 last_status, obs_since_status = last_pub, 0
         sub.undeclare()
         status_pub.undeclare()

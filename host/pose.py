@@ -2,20 +2,29 @@
 
 The schema, for subscribers in any language, is in ``docs/pose-schema.md``. In short::
 
-    {"schema": "superbody.people", "version": 1, "site": "lab", "seq": 42,
+    {"schema": "superbody.people", "version": 2, "site": "lab", "seq": 42,
      "stamp_ns": 1718000000000000000, "latency_ns": 2100000, "estimator": "analytic",
      "cameras_alive": ["cam-1", "cam-2"],
      "people": [{"id": 3, "x": 1.234, "y": -0.5, "yaw": 1.5708,          # m, m, rad (REP-103)
                  "vx": 0.41, "vy": 0.0, "yaw_rate": 0.0123,              # m/s, m/s, rad/s
                  "cov": [xx, xy, xyaw, yy, yyaw, yawyaw],                # upper triangle
                  "confidence": 0.93, "views": 2, "cameras": ["cam-1", "cam-2"],
-                 "stamp_ns": 1717999999990000000}]}
+                 "stamp_ns": 1717999999990000000, "estimator": "hybrid"}]}
 
 ``encode`` rounds positions to 1 mm, velocities to 1 mm/s, angles and angular rates to 1e-4,
 confidence to 1e-4 and covariances to 6 significant digits, so a person is about 250 bytes.
 ``decode`` checks every field and raises ``PoseDecodeError`` naming the field
 (``people[2].cov[3]``), a ``reason`` from ``REASONS`` for reject counters, and the allowed range;
 the checks shared with the Observation codec are in ``edge/payload.py``.
+
+How (as in ``edge/wire.py``): the message is defined as msgspec structs (``PoseArrayMsg``,
+``PersonPoseMsg``, and their version 1 forms), which carry every rule a JSON Schema can state and
+from which ``docs/schemas/people.schema.json`` is generated. A payload the reference encoder
+could have written (ASCII, no escapes) is decoded by msgspec in one pass, then checked for what a
+type cannot state (distinct ids and camera ids, views against cameras, no repeated key). What
+fails goes to the rule-by-rule validator (``_pose_array``), which names the first violation.
+``encode`` checks the in-memory values vectorised, on the rounded values it sends, and writes the
+structs; on a failed check the validator names the field.
 """
 
 from __future__ import annotations
@@ -23,14 +32,18 @@ from __future__ import annotations
 import json
 import math
 import numbers
+import re
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Final
+from typing import TYPE_CHECKING, Annotated, Any, Final, Literal
 
+import msgspec
 import numpy as np
+from msgspec import Meta, Struct
 from numpy.typing import NDArray
 
 from superbody.edge.payload import (
     MAX_INT63,
+    NAME_PATTERN,
     REASONS,
     DecodeError,
     as_int,
@@ -42,7 +55,9 @@ from superbody.edge.payload import (
     check_object,
     fail,
     parse_json,
+    typed_input,
 )
+from superbody.edge.site import NAME_RE
 
 if TYPE_CHECKING:
     import zenoh
@@ -58,6 +73,10 @@ __all__ = [
     "PersonPose",
     "PoseArray",
     "PoseDecodeError",
+    "PersonPoseMsg",
+    "PersonPoseMsgV1",
+    "PoseArrayMsg",
+    "PoseArrayMsgV1",
     "encode",
     "decode",
     "zenoh_encoding",
@@ -91,6 +110,120 @@ _TRIU: Final = np.triu_indices(3)  # row-major upper triangle: (0,0) (0,1) (0,2)
 _YAW_WIRE_MAX: Final[float] = 3.1415  # the largest 1e-4 multiple inside (-pi, pi]
 _ESTIMATOR_MAX: Final[int] = 128
 _NUMBER: Final[frozenset[type]] = frozenset({int, float})
+
+
+# --- the message as types ------------------------------------------------------------------
+# Every rule a JSON Schema can state lives here; the rest is in _typed_decode.
+
+_Name = Annotated[str, Meta(pattern=NAME_PATTERN, description="1-64 characters of A-Z a-z 0-9 _ - (a Zenoh key chunk)")]
+_Names = Annotated[list[_Name], Meta(max_length=MAX_CAMERAS, extra_json_schema={"uniqueItems": True})]
+_Count = Annotated[int, Meta(ge=0, le=MAX_INT63)]
+_Estimator = Annotated[str, Meta(min_length=1, max_length=_ESTIMATOR_MAX, pattern="^[ -~]+$",
+                                 description="printable ASCII")]
+_Coord = Annotated[float, Meta(ge=-_MAX_COORD_M, le=_MAX_COORD_M, description="metres, world frame (REP-103)")]
+_Speed = Annotated[float, Meta(ge=-_MAX_SPEED, le=_MAX_SPEED)]
+_Var = Annotated[float, Meta(ge=0.0, le=_MAX_COV)]
+_Covar = Annotated[float, Meta(ge=-_MAX_COV, le=_MAX_COV)]
+
+
+class PersonPoseMsgV1(Struct, forbid_unknown_fields=True, kw_only=True):
+    """One person's torso pose, version 1 (version 2 without the per-person estimator)."""
+
+    id: Annotated[int, Meta(ge=0, le=_MAX_ID)]
+    x: _Coord
+    y: _Coord
+    yaw: Annotated[float, Meta(ge=-math.pi, le=math.pi, description="radians, counter-clockwise from +x; -pi reads as pi")]
+    vx: Annotated[_Speed, Meta(description="m/s")]
+    vy: Annotated[_Speed, Meta(description="m/s")]
+    yaw_rate: Annotated[_Speed, Meta(description="rad/s")]
+    cov: Annotated[tuple[_Var, _Covar, _Covar, _Var, _Covar, _Var],
+                   Meta(description="upper triangle of the (x, y, yaw) covariance: xx, xy, xyaw, yy, yyaw, yawyaw")]
+    confidence: Annotated[float, Meta(ge=0.0, le=1.0)]
+    views: Annotated[int, Meta(ge=0, le=_MAX_VIEWS, description=">= len(cameras); 0 only with no cameras (checked by the decoder)")]
+    cameras: _Names
+    stamp_ns: _Count
+
+
+class PersonPoseMsg(PersonPoseMsgV1, forbid_unknown_fields=True, kw_only=True):
+    """One person's torso pose at one tick; ids are distinct within a message (checked by the decoder)."""
+
+    estimator: Annotated[_Estimator, Meta(description='"hybrid", "onnx" or "analytic": what produced this pose')]
+
+
+class PoseArrayMsgV1(Struct, forbid_unknown_fields=True, kw_only=True):
+    """The host's PoseArray, version 1 (still read)."""
+
+    schema: Literal["superbody.people"]
+    version: Literal[1]
+    site: _Name
+    seq: _Count
+    stamp_ns: _Count
+    latency_ns: _Count
+    estimator: _Estimator
+    cameras_alive: _Names
+    people: Annotated[list[PersonPoseMsgV1], Meta(max_length=MAX_PEOPLE)]
+
+
+class PoseArrayMsg(Struct, forbid_unknown_fields=True, kw_only=True):
+    """The host's PoseArray: each tracked person's floor pose (docs/pose-schema.md)."""
+
+    schema: Literal["superbody.people"]
+    version: Literal[2]
+    site: _Name
+    seq: _Count
+    stamp_ns: _Count
+    latency_ns: _Count
+    estimator: _Estimator
+    cameras_alive: _Names
+    people: Annotated[list[PersonPoseMsg], Meta(max_length=MAX_PEOPLE)]
+
+
+_DECODERS: Final = (msgspec.json.Decoder(PoseArrayMsg), msgspec.json.Decoder(PoseArrayMsgV1))  # the newest first
+_ENCODER: Final = msgspec.json.Encoder()
+# The JSON strings of a valid message: 9 keys, schema, site and estimator at the top; 12 keys a
+# person (13 and its estimator in version 2); and every camera id.
+_TOP_STRINGS: Final[int] = 12
+_PERSON_STRINGS: Final[dict[int, int]] = {1: 12, 2: 14}
+# (N, 6) upper triangles to (N, 9) row-major full matrices.
+_FULL_FROM_UPPER: Final = np.array([0, 1, 2, 1, 3, 4, 2, 4, 5])
+
+
+def _typed_decode(data: bytes, expected_site: str | None) -> PoseArray | None:
+    """The PoseArray if ``data`` passes every rule, else None (the validator then names the violation)."""
+    for decoder in _DECODERS:
+        try:
+            msg = decoder.decode(data)
+            break
+        except (msgspec.ValidationError, msgspec.DecodeError):
+            continue
+    else:
+        return None
+    people = msg.people
+    strings = _TOP_STRINGS + len(msg.cameras_alive) + _PERSON_STRINGS[msg.version] * len(people)
+    strings += sum(len(p.cameras) for p in people)
+    if data.count(b'"') != 2 * strings:
+        return None  # a repeated key (typed_input ruled out escapes)
+    if expected_site is not None and msg.site != expected_site:
+        fail("site", "site", f"must be {expected_site!r} (this subscriber's site), got {msg.site!r}")
+    if len(set(msg.cameras_alive)) != len(msg.cameras_alive) or len({p.id for p in people}) != len(people):
+        return None
+    for p in people:
+        if len(set(p.cameras)) != len(p.cameras) or p.views < len(p.cameras) or (p.views and not p.cameras):
+            return None
+    cov = np.array([p.cov for p in people], dtype=np.float64).reshape(-1, 6)[:, _FULL_FROM_UPPER].reshape(-1, 3, 3)
+    top = msg.estimator
+    return PoseArray(
+        site=msg.site, seq=msg.seq, stamp_ns=msg.stamp_ns, latency_ns=msg.latency_ns, estimator=top,
+        cameras_alive=tuple(msg.cameras_alive),
+        people=tuple(
+            PersonPose(
+                id=p.id, x=p.x, y=p.y, yaw=math.pi if p.yaw == -math.pi else p.yaw,  # the same heading; keep (-pi, pi]
+                vx=p.vx, vy=p.vy, yaw_rate=p.yaw_rate, cov=cov[i], confidence=p.confidence, cameras=tuple(p.cameras),
+                stamp_ns=p.stamp_ns, views=p.views, estimator=p.estimator if msg.version >= 2 else top,
+            )
+            for i, p in enumerate(people)
+        ),
+    )
 
 
 # --- in-memory types -----------------------------------------------------------------------
@@ -177,7 +310,7 @@ class PoseDecodeError(DecodeError):
     """
 
 
-# --- validation ----------------------------------------------------------------------------
+# --- the rule-by-rule validator: names the first violation ---------------------------------
 
 
 def _number(value: Any, path: str, lo: float, hi: float, interval: str) -> float:
@@ -303,6 +436,11 @@ def decode(payload: bytes | bytearray | memoryview, *, expected_site: str | None
         PoseDecodeError: for any invalid payload; ``field`` names the value, ``reason`` is in ``REASONS``.
     """
     try:
+        data = typed_input(payload, MAX_PAYLOAD_BYTES)
+        if data is not None:
+            poses = _typed_decode(data, expected_site)
+            if poses is not None:
+                return poses
         return _pose_array(parse_json(payload, MAX_PAYLOAD_BYTES), expected_site)
     except DecodeError as e:  # the checks raise the shared base class; name this codec in the type
         raise PoseDecodeError(e.field, e.reason, e.detail) from None
@@ -336,11 +474,14 @@ def _wire_cov(cov: Any, path: str) -> list:
     c = np.asarray(cov, dtype=np.float64)
     if c.shape != (3, 3):
         raise ValueError(f"cannot encode poses: {path} must have shape (3, 3), has {c.shape}")
-    if np.isfinite(c).all():
+    finite = np.isfinite(c)
+    if finite.all():
         # Filters leave float noise of ~1e-16 of the largest entry; a real asymmetry is a bug.
         if not np.allclose(c, c.T, rtol=0, atol=1e-9 * float(np.abs(c).max()) + 1e-15):
             raise ValueError(f"cannot encode poses: {path} must be symmetric, got {c.tolist()}")
         c = (c + c.T) / 2
+    elif (finite != finite.T).any():  # a NaN below the diagonal only is an asymmetry too, not one to drop
+        raise ValueError(f"cannot encode poses: {path} must be symmetric, got {c.tolist()}")
     # 6 significant digits; NaN and inf pass through for validation to name.
     return [float(f"{v:.6g}") for v in c[_TRIU].tolist()]
 
@@ -363,6 +504,103 @@ def _person_doc(p: PersonPose, path: str) -> dict:
     }
 
 
+def _int_in(value: Any, lo: int, hi: int) -> int | None:
+    """``value`` as an int if it is an integer (numpy's too, not a bool) in [lo, hi], else None."""
+    if type(value) is not int:
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            return None
+        value = int(value)
+    return value if lo <= value <= hi else None
+
+
+def _ints_in(values: list, lo: int, hi: int) -> list[int] | None:
+    """Every value an integer in [lo, hi] (as ``_int_in``), as Python ints; None if one is not."""
+    if not all(type(v) is int for v in values):
+        values = [_int_in(v, lo, hi) for v in values]
+        return None if None in values else values
+    return values if not values or (lo <= min(values) and max(values) <= hi) else None
+
+
+def _names_ok(names: list[str]) -> bool:
+    """Every entry a camera id: one regex call for all of them, joined by NUL (which no id holds)."""
+    if not names:
+        return True
+    text = "\x00".join(names)  # a non-string raises TypeError
+    return text.count("\x00") == len(names) - 1 and bool(_NAMES_RE.fullmatch(text + "\x00"))
+
+
+def _estimator_ok(value: Any) -> bool:
+    return type(value) is str and 1 <= len(value) <= _ESTIMATOR_MAX and value.isascii() and value.isprintable()
+
+
+# Columns of the (N, 7) scalar table and the decimals each is sent with.
+_SCALARS: Final[tuple[str, ...]] = ("x", "y", "yaw", "vx", "vy", "yaw_rate", "confidence")
+_SCALE: Final = 10.0 ** np.array([3, 3, 4, 3, 3, 4, 4])  # 1 mm, 1 mm/s, 1e-4 rad, rad/s and confidence
+_LO: Final = np.array([-_MAX_COORD_M, -_MAX_COORD_M, -math.pi, -_MAX_SPEED, -_MAX_SPEED, -_MAX_SPEED, 0.0])
+_HI: Final = np.array([_MAX_COORD_M, _MAX_COORD_M, math.pi, _MAX_SPEED, _MAX_SPEED, _MAX_SPEED, 1.0])
+_COV_LO: Final = np.array([0.0 if k in _COV_DIAG else -_MAX_COV for k in range(6)])
+_NUMBER_TYPES: Final[frozenset[type]] = frozenset({float, int, np.float64, np.float32})
+_NAMES_RE: Final = re.compile(r"(?:[A-Za-z0-9_-]{1,64}\x00)*")  # camera ids, each followed by NUL
+
+
+def _typed_encode(poses: PoseArray) -> bytes | None:
+    """The payload, or None if a value breaks a rule (or is of an odd type): every check runs on
+    the rounded values that are sent, for all people at once. None sends ``encode`` to the
+    validator, which names the field."""
+    people = poses.people
+    n = len(people)
+    top = _ints_in([poses.seq, poses.stamp_ns, poses.latency_ns], 0, MAX_INT63)
+    alive = poses.cameras_alive
+    if (top is None or n > MAX_PEOPLE or type(poses.site) is not str or not NAME_RE.fullmatch(poses.site)
+            or not _estimator_ok(poses.estimator) or type(alive) not in (tuple, list) or len(alive) > MAX_CAMERAS
+            or len(set(alive)) != len(alive) or not _names_ok(alive)):
+        return None
+    msg_people: list[PersonPoseMsg] = []
+    if n:
+        flat = [getattr(p, a) for p in people for a in _SCALARS]
+        if not _NUMBER_TYPES.issuperset(map(type, flat)):  # bools, strings, None...
+            return None
+        raw = np.array(flat, dtype=np.float64).reshape(n, len(_SCALARS))  # (n, 7); an int beyond float64 raises
+        # Half to even on the scaled value: the grid of round(v, d), ties aside.
+        wire = np.round(raw * _SCALE) / _SCALE
+        yaw = raw[:, 2]
+        # Yaw to 1e-4 rad, kept inside (-pi, pi]: values near +-pi would round to +-3.1416, past pi.
+        wire[:, 2] = np.where((yaw >= -math.pi) & (yaw <= math.pi) & (np.abs(wire[:, 2]) > _YAW_WIRE_MAX), _YAW_WIRE_MAX, wire[:, 2])
+        cov = np.array([p.cov for p in people], dtype=np.float64)  # (n, 3, 3)
+        if cov.shape != (n, 3, 3) or not ((wire >= _LO) & (wire <= _HI)).all() or not np.isfinite(cov).all():
+            return None
+        cov_t = cov.transpose(0, 2, 1)
+        # Filters leave float noise of ~1e-16 of the largest entry; a real asymmetry is a bug.
+        atol = 1e-9 * np.abs(cov).max(axis=(1, 2)) + 1e-15
+        if not (np.abs(cov - cov_t) <= atol[:, None, None]).all():
+            return None
+        upper = ((cov + cov_t) / 2)[:, _TRIU[0], _TRIU[1]]  # (n, 6)
+        # 6 significant digits: one C-level format of all of them.
+        c = np.array(("%.6g " * upper.size % tuple(upper.ravel().tolist())).split(), dtype=np.float64).reshape(n, 6)
+        if not ((c >= _COV_LO) & (c <= _MAX_COV)).all():
+            return None
+        ids = _ints_in([p.id for p in people], 0, _MAX_ID)
+        views = _ints_in([p.views for p in people], 0, _MAX_VIEWS)
+        stamps = _ints_in([p.stamp_ns for p in people], 0, MAX_INT63)
+        cams = [p.cameras for p in people]
+        if (ids is None or views is None or stamps is None or len(set(ids)) != n
+                or not all(type(cs) in (tuple, list) and len(cs) <= MAX_CAMERAS and len(set(cs)) == len(cs) for cs in cams)
+                or not _names_ok([c for cs in cams for c in cs])
+                or not all(v >= len(cs) and (len(cs) or not v) for v, cs in zip(views, cams))
+                or not all(_estimator_ok(e) for e in {p.estimator for p in people if type(p.estimator) is str})
+                or not all(type(p.estimator) is str for p in people)):
+            return None
+        msg_people = [
+            PersonPoseMsg(id=i, x=x, y=y, yaw=yw, vx=vx, vy=vy, yaw_rate=yr, cov=cv, confidence=conf, views=v,
+                          cameras=list(cs), stamp_ns=st, estimator=p.estimator)
+            for p, i, (x, y, yw, vx, vy, yr, conf), cv, v, cs, st in zip(people, ids, wire.tolist(), c.tolist(), views, cams, stamps)
+        ]
+    return _ENCODER.encode(PoseArrayMsg(
+        schema=SCHEMA, version=VERSION, site=poses.site, seq=top[0], stamp_ns=top[1], latency_ns=top[2],
+        estimator=poses.estimator, cameras_alive=list(alive), people=msg_people,
+    ))
+
+
 def encode(poses: PoseArray) -> bytes:
     """Serialise a PoseArray to compact JSON (about 250 bytes per person).
 
@@ -374,6 +612,20 @@ def encode(poses: PoseArray) -> bytes:
         ValueError: the poses would not decode (a value out of range, a NaN, a repeated id, an
             asymmetric covariance...); the message names the field.
     """
+    try:
+        payload = _typed_encode(poses)
+    except (TypeError, ValueError, OverflowError):  # e.g. a value numpy cannot read as a number
+        payload = None
+    if payload is None:
+        payload = _checked_encode(poses)
+    if len(payload) > MAX_PAYLOAD_BYTES:  # cannot happen for valid input; kept as a guard
+        raise ValueError(f"cannot encode poses: {len(payload)} bytes, more than the {MAX_PAYLOAD_BYTES} allowed")
+    return payload
+
+
+def _checked_encode(poses: PoseArray) -> bytes:
+    """The encoder for what ``_typed_encode`` refused: a document checked by the validator, which
+    names the field that breaks a rule (and encodes what only looked odd, e.g. a numpy float)."""
     doc = {
         "schema": SCHEMA,
         "version": VERSION,
@@ -390,10 +642,7 @@ def encode(poses: PoseArray) -> bytes:
         _pose_array(doc, None)
     except DecodeError as e:
         raise ValueError(f"cannot encode poses: {e}") from e
-    payload = json.dumps(doc, separators=(",", ":"), allow_nan=False).encode("utf-8")
-    if len(payload) > MAX_PAYLOAD_BYTES:  # cannot happen for valid input; kept as a guard
-        raise ValueError(f"cannot encode poses: {len(payload)} bytes, more than the {MAX_PAYLOAD_BYTES} allowed")
-    return payload
+    return json.dumps(doc, separators=(",", ":"), allow_nan=False).encode("utf-8")
 
 
 def zenoh_encoding() -> zenoh.Encoding:

@@ -3,7 +3,7 @@
 Subscribes to ``superbody/<site>/**`` (every site: ``superbody/**``) and writes each
 Observation, PoseArray and host status as it arrived: the payload bytes unchanged (JSON), one
 MCAP channel per Zenoh key (the key is the topic), each with its message's JSON Schema
-(``edge/observation.schema.json``, ``host/people.schema.json``, ``host/status.schema.json``).
+(``docs/schemas/{observation,people,status}.schema.json``, package ``superbody.schemas``).
 Log time is the arrival time, publish time the message's own ``stamp_ns`` (capture time) when
 it has one. Payloads that are not JSON objects are still recorded, and counted.
 

@@ -1,9 +1,12 @@
-"""The JSON Schemas shipped for subscribers (and written into MCAP recordings) accept what the
-reference encoders write and reject what the reference decoders reject at the top level."""
+"""The JSON Schemas shipped for subscribers (and written into MCAP recordings) are generated from
+the typed message definitions, accept what the reference encoders write and the examples in the
+docs, and reject what the reference decoders reject at the top level."""
 
 from __future__ import annotations
 
 import json
+import math
+import re
 import time
 
 import jsonschema
@@ -15,7 +18,9 @@ from superbody.edge.resources import MESSAGES, json_schema
 from superbody.edge.simulator import SimCamera, World
 from superbody.edge.site import load_site
 from superbody.host import pose as pose_msg
-from tests.conftest import WTF_SITE
+from superbody.host import schemas
+from superbody.host import status as host_status
+from tests.conftest import ROOT, WTF_SITE
 
 
 def _validator(message: str) -> jsonschema.protocols.Validator:
@@ -83,3 +88,40 @@ def test_invalid_documents_fail(message, change, why):
     change(doc)
     with pytest.raises(jsonschema.ValidationError):
         _validator(message).validate(doc)
+
+
+@pytest.mark.parametrize("message", sorted(MESSAGES))
+def test_shipped_schemas_are_generated_from_the_types(message):
+    """docs/schemas/ holds exactly what the generator writes (run python -m superbody.host.schemas --write),
+    and the package data is that file."""
+    text = schemas.render(message)
+    shipped = ROOT / "docs" / "schemas" / schemas.FILES[message]
+    assert shipped.read_text(encoding="utf-8") == text, f"{shipped} is out of date: run python -m superbody.host.schemas --write"
+    assert json_schema(message) == text.encode("utf-8")
+    assert schemas.main([]) == 0
+
+
+def test_generator_reports_a_stale_file(tmp_path, monkeypatch, capsys):
+    for name, file_name in schemas.FILES.items():
+        (tmp_path / file_name).write_text(schemas.render(name), encoding="utf-8")
+    monkeypatch.setattr(schemas, "DOCS_DIR", tmp_path)
+    assert schemas.main([]) == 0
+    (tmp_path / "people.schema.json").write_text("{}", encoding="utf-8")
+    assert schemas.main([]) == 1
+    assert "people.schema.json" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("message, doc", [("observation", "observation-schema.md"), ("people", "pose-schema.md"), ("status", "status-schema.md")])
+def test_docs_examples_validate(message, doc):
+    blocks = re.findall(r"```json\n(.*?)\n```", (ROOT / "docs" / doc).read_text(encoding="utf-8"), re.S)
+    assert blocks, f"docs/{doc} has no ```json example"
+    for block in blocks:
+        _validator(message).validate(json.loads(block))
+
+
+def test_encoded_host_status_validates_with_and_without_latency():
+    v = _validator("status")
+    for p50, p99 in ((1.84, 3.9), (math.nan, math.nan)):
+        status = host_status.HostStatus(cameras_alive=["1", "2"], cameras_total=3, people=2, obs_per_s=44.9,
+                                        latency_ms=host_status.latency(p50, p99), rejected={"late": 2}, queue_dropped=0, published=431)
+        v.validate(json.loads(host_status.encode(status)))

@@ -62,7 +62,8 @@ def test_wheel_holds_one_namespace_and_the_shipped_files(installed):
     for shipped in ("superbody/sites/wtf-apartment.toml", "superbody/sites/lab-example.toml",
                     "superbody/models/wtf-apartment.int8.onnx", "superbody/models/site-independent.int8.onnx",
                     "superbody/edge/py.typed", "superbody/host/py.typed", "superbody/models/py.typed",
-                    "superbody/edge/observation.schema.json", "superbody/host/people.schema.json", "superbody/host/status.schema.json"):
+                    "superbody/schemas/observation.schema.json", "superbody/schemas/people.schema.json",
+                    "superbody/schemas/status.schema.json"):
         assert shipped in names, shipped
     # Nothing named edge, host or models at the top of site-packages.
     assert not [p.name for p in installed["site"].iterdir() if p.name in ("edge", "host", "models")]
@@ -75,11 +76,13 @@ def test_installed_wheel_runs_version_and_the_demo_from_an_empty_folder(installe
     out = _run([str(bin_ / "superbody"), "--version"], empty, env, 60).stdout
     assert out.strip().startswith("superbody "), out
     where = _run([str(bin_ / "python"), "-c", "import importlib.util as u, superbody.edge.resources as r; "
-                  "print(r.__file__); print(r.site_path()); print([u.find_spec(n) is None for n in ('edge', 'host', 'models')])"],
+                  "print(r.__file__); print(r.site_path()); print([u.find_spec(n) is None for n in ('edge', 'host', 'models')]); "
+                  "import json; print(json.loads(r.json_schema('people'))['$id'])"],
                  empty, env, 60).stdout.splitlines()
     assert where[0].startswith(str(installed["site"])), where  # imported from the wheel, not this checkout
     assert where[1].startswith(str(installed["site"])), where  # the default site file is package data
     assert where[2] == "[True, True, True]", where  # no top-level edge/host/models to shadow a user's own
+    assert where[3] == "superbody.people/2", where  # the JSON Schemas are package data (superbody.schemas)
     summary = empty / "summary.json"
     demo = _run([str(bin_ / "superbody"), "demo", "--duration", "15", "--clock-scale", "3", "--no-table",
                  "--port", str(free_port()), "--json-summary", str(summary)], empty, env, 120)

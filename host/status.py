@@ -1,0 +1,138 @@
+"""The host's status message on ``superbody/<site>/host/status``: a typed struct and its codec.
+
+The schema, for dashboards and alarms in any language, is in ``docs/status-schema.md``. In short::
+
+    {"cameras_alive": ["1", "2"], "cameras_total": 3, "people": 2, "obs_per_s": 44.9,
+     "latency_ms": {"p50": 1.8, "p99": 3.4}, "rejected": {"late": 2}, "queue_dropped": 0,
+     "published": 431}
+
+``latency_ms.p50`` and ``p99`` are ``null`` until the host has published a PoseArray that used a
+new observation. The status is not versioned: it may gain fields, and ``decode`` ignores fields
+it does not know. ``encode`` checks every value (a few comparisons: the host builds the status
+from its own counters) and writes compact JSON with msgspec, which never writes ``NaN``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any, Final
+
+import msgspec
+from msgspec import Meta, Struct
+
+from superbody.edge.payload import NAME_PATTERN, DecodeError, check_object, fail, join_path, parse_json
+from superbody.edge.site import NAME_RE
+
+__all__ = ["MAX_PAYLOAD_BYTES", "MAX_CAMERAS", "Latency", "HostStatus", "latency", "encode", "decode"]
+
+MAX_CAMERAS: Final[int] = 64  # a site file holds at most 64 cameras
+MAX_PEOPLE: Final[int] = 64
+# 64 camera ids and every reject reason with its count fit in a few KB; this only stops abuse.
+MAX_PAYLOAD_BYTES: Final[int] = 64 * 1024
+
+_NonNegative = Annotated[int, Meta(ge=0)]
+_Milliseconds = Annotated[float, Meta(ge=0.0)]
+
+
+class Latency(Struct, kw_only=True):
+    """Median and 99th percentile of the host's latency, milliseconds (arrival of the newest
+    observation used to the publication of its PoseArray); null before the first such PoseArray."""
+
+    p50: _Milliseconds | None
+    p99: _Milliseconds | None
+
+
+class HostStatus(Struct, kw_only=True):
+    """The host's periodic status (docs/status-schema.md). Unversioned; consumers ignore fields they do not know."""
+
+    cameras_alive: Annotated[list[Annotated[str, Meta(pattern=NAME_PATTERN)]],
+                             Meta(max_length=MAX_CAMERAS, extra_json_schema={"uniqueItems": True},
+                                  description="ids of the site's cameras whose liveliness token is present, sorted")]
+    cameras_total: Annotated[int, Meta(ge=1, le=MAX_CAMERAS, description="cameras in the site file")]
+    people: Annotated[int, Meta(ge=0, le=MAX_PEOPLE, description="people in the PoseArray published just before")]
+    obs_per_s: Annotated[float, Meta(ge=0.0, description="observation payloads taken from the queue per second since the previous status")]
+    latency_ms: Latency
+    rejected: Annotated[dict[str, _NonNegative], Meta(description="observations (and poses) dropped, by reason")]
+    queue_dropped: Annotated[int, Meta(ge=0, description="observations dropped unread: the host's queue was full")]
+    published: Annotated[int, Meta(ge=0, description="PoseArrays published")]
+
+
+_ENCODER: Final = msgspec.json.Encoder()
+
+
+def latency(p50: float, p99: float) -> Latency:
+    """The status latency from two percentiles in ms; NaN (no sample yet) becomes null."""
+    return Latency(p50=None if math.isnan(p50) else float(p50), p99=None if math.isnan(p99) else float(p99))
+
+
+def _check(status: HostStatus) -> None:
+    def bad(field: str, detail: str) -> None:
+        raise ValueError(f"cannot encode host status: {field} {detail}")
+
+    alive = status.cameras_alive
+    if type(alive) is not list or len(alive) > MAX_CAMERAS or len(set(alive)) != len(alive) \
+            or not all(type(c) is str and NAME_RE.fullmatch(c) for c in alive):
+        bad("cameras_alive", f"must be a list of at most {MAX_CAMERAS} distinct camera ids, got {alive!r}")
+    for field, lo, hi in (("cameras_total", 1, MAX_CAMERAS), ("people", 0, MAX_PEOPLE), ("queue_dropped", 0, None), ("published", 0, None)):
+        v = getattr(status, field)
+        if type(v) is not int or v < lo or (hi is not None and v > hi):
+            bad(field, f"must be an integer in [{lo}, {hi if hi is not None else 'inf'}), got {v!r}")
+    rate = status.obs_per_s
+    if type(rate) not in (int, float) or not 0.0 <= rate < math.inf:
+        bad("obs_per_s", f"must be a finite number >= 0, got {rate!r}")
+    for field in ("p50", "p99"):
+        v = getattr(status.latency_ms, field)
+        if v is not None and (type(v) not in (int, float) or not 0.0 <= v < math.inf):
+            bad(f"latency_ms.{field}", f"must be null or a finite number >= 0, got {v!r}")
+    if type(status.rejected) is not dict or not all(type(k) is str and type(n) is int and n >= 0 for k, n in status.rejected.items()):
+        bad("rejected", f"must map reason names to counts >= 0, got {status.rejected!r}")
+
+
+def encode(status: HostStatus) -> bytes:
+    """Compact JSON of one status.
+
+    Raises:
+        ValueError: a value outside its range (the message names the field).
+    """
+    _check(status)
+    return _ENCODER.encode(status)
+
+
+def decode(payload: bytes | bytearray | memoryview) -> HostStatus:
+    """Parse and validate one status payload (fields this version does not know are ignored).
+
+    Raises:
+        DecodeError: for any invalid payload; ``field`` names the value (``$`` for the whole
+            payload), ``reason`` is ``oversize``, ``not_utf8``, ``not_json``, ``non_finite``,
+            ``duplicate_key``, ``type``, ``missing`` or ``range``.
+    """
+    doc = parse_json(payload, MAX_PAYLOAD_BYTES)  # size, UTF-8, JSON, NaN literals: the shared checks and errors
+    _no_repeated_key(doc, "")
+    try:
+        status = msgspec.convert(doc, HostStatus, strict=True)
+    except msgspec.ValidationError as e:
+        raise _validation_error(str(e)) from None
+    if len(set(status.cameras_alive)) != len(status.cameras_alive):
+        fail("cameras_alive", "range", "repeats a camera id; ids must be distinct")
+    return status
+
+
+def _no_repeated_key(doc: Any, path: str) -> None:
+    if isinstance(doc, dict):
+        check_object(doc, path, (), tuple(doc), label="superbody host status")  # reports a repeated key with its path
+        for k, v in doc.items():
+            _no_repeated_key(v, join_path(path, k))
+    elif isinstance(doc, list):
+        for i, v in enumerate(doc):
+            _no_repeated_key(v, f"{path}[{i}]")
+
+
+def _validation_error(text: str) -> DecodeError:
+    """msgspec's "Expected `int` >= 0, got ... - at `$.people`" as a DecodeError naming the field."""
+    message, _, where = text.partition(" - at `")
+    field = where.rstrip("`").removeprefix("$.") if where else ""
+    if message.startswith("Object missing required field `"):
+        name = message.split("`")[1]
+        return DecodeError(join_path(field.removeprefix("$"), name), "missing", "is required")
+    reason = "range" if any(op in message for op in (">=", "<=", "length", "matching")) else "type"
+    return DecodeError(field.removeprefix("$") or "$", reason, message[0].lower() + message[1:])
