@@ -113,6 +113,9 @@ class _Watcher:
         self.score = _Score()
         self.lock = threading.Lock()
         self.killed_ns: int | None = None
+        # A person counts as appeared only once the host publishes: before that the delay is
+        # the host's start-up (seconds on a loaded machine), not the tracker's.
+        self.host_up = False
 
     def on_observation(self, sample) -> None:
         try:
@@ -123,6 +126,8 @@ class _Watcher:
             return
         _, who = self.cams[obs.camera].observe(obs.stamp_ns)
         with self.lock:
+            if not self.host_up:
+                return
             for k, view in zip(who, obs.people):
                 if k >= 0 and view.num_visible >= 6:  # enough for the tracker to start a candidate
                     self.score.appeared_ns.setdefault(k, obs.stamp_ns)
@@ -133,6 +138,7 @@ class _Watcher:
         except pose_msg.PoseDecodeError:
             return
         with self.lock:
+            self.host_up = True
             s = self.score
             s.arrays += 1
             s.latency_ms.append(arr.latency_ns / 1e6)

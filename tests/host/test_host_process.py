@@ -18,8 +18,8 @@ SITE = str(WTF_SITE)
 
 
 # The model card's simulated figures for the shipped int8 model (the same demo, no camera killed):
-# position MAE 48 mm, yaw MAE 8.4 deg. Bounds here: 1.5 times those (camera 3 dies half way).
-CARD_POSITION_MM, CARD_YAW_DEG = 48.0, 8.4
+# position MAE 54 mm, yaw MAE 9.6 deg. Bounds here: 1.5 times those (camera 3 dies half way).
+CARD_POSITION_MM, CARD_YAW_DEG = 54.0, 9.6
 
 
 @pytest.mark.slow
