@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Final, Literal, NamedTuple
+from typing import Final, Literal, NamedTuple, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -292,28 +292,30 @@ def _predict_positions(x: NDArray, P: NDArray, dt: NDArray, accel_std_mps2: floa
     return predict(x, P, F, white_accel_noise(dt, accel_std_mps2))
 
 
-def _fuse_positions(tracks: list[Track], xy: NDArray, sigma: NDArray, t_ns: int, accel_std_mps2: float) -> None:
-    """Kalman-update the positions of ``tracks`` with floor points (B, 2) of 1-sigma (B,), seen at ``t_ns``."""
+def _fuse_positions(tracks: list[Track], xy: NDArray, sigma: NDArray, t_ns: int | NDArray, accel_std_mps2: float) -> None:
+    """Kalman-update the positions of ``tracks`` with floor points (B, 2) of 1-sigma (B,), seen
+    at ``t_ns`` (one time, or (B,) one per track)."""
+    t_all = np.broadcast_to(np.asarray(t_ns, dtype=np.int64), (len(tracks),))  # (B,)
     seen = np.array([tr._kf_t is not None for tr in tracks], dtype=bool)
     for j in np.flatnonzero(~seen):  # first point: the velocity is unknown
         tr = tracks[j]
-        tr._kf_t = t_ns
+        tr._kf_t = int(t_all[j])
         tr._kf_x = np.vstack([xy[j], np.zeros(2)])
         tr._kf_P = np.diag([sigma[j] ** 2, _INIT_SPEED_STD**2])
     if not seen.any():
         return
     old = [tracks[j] for j in np.flatnonzero(seen)]
-    xy, sigma = xy[seen], sigma[seen]
+    xy, sigma, t_old = xy[seen], sigma[seen], t_all[seen]
     x = np.array([tr._kf_x for tr in old])  # (B, 2, 2)
     P = np.array([tr._kf_P for tr in old])  # (B, 2, 2)
-    dt = np.array([(t_ns - tr._kf_t) / _NS_PER_S for tr in old])  # (B,)
+    dt = (t_old - np.array([tr._kf_t for tr in old], dtype=np.int64)) / _NS_PER_S  # (B,)
     x, P = _predict_positions(x, P, np.maximum(dt, 0.0), accel_std_mps2)
     # A point older than the state (another camera's frame came late) is applied at the state's
     # time, with the distance the person may have walked since as extra noise.
     R = (sigma**2 + (_INIT_SPEED_STD * np.minimum(dt, 0.0)) ** 2)[:, None, None]  # (B, 1, 1)
     x, P = update(x, P, xy[:, None, :], _H, R)
     for j, tr in enumerate(old):
-        tr._kf_x, tr._kf_P, tr._kf_t = x[j], P[j], max(tr._kf_t, t_ns)
+        tr._kf_x, tr._kf_P, tr._kf_t = x[j], P[j], max(tr._kf_t, int(t_old[j]))
 
 
 @dataclass(frozen=True)
@@ -707,6 +709,23 @@ class Tracker:
             return False
         _fuse_positions([tr], xy[None], np.array([float(std_m)]), int(stamp_ns), self.config.accel_std_mps2)
         return True
+
+    def set_positions(self, track_ids: Sequence[int], xy: NDArray, stamps_ns: Sequence[int], std_m: float = 0.1) -> NDArray[np.bool_]:
+        """``set_position`` for many tracks at once (one Kalman batch): ids (B,), xy (B, 2), stamps (B,).
+
+        Returns:
+            (B,) bool, False where there is no such track or the point is not finite.
+        """
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        if not (std_m > 0 and math.isfinite(std_m)):
+            return np.zeros(len(xy), dtype=bool)
+        tracks = [self._tracks.get(int(i)) for i in track_ids]
+        ok = np.array([tr is not None for tr in tracks], dtype=bool) & np.isfinite(xy).all(axis=1)
+        if ok.any():
+            idx = np.flatnonzero(ok)
+            _fuse_positions([tracks[i] for i in idx], xy[idx], np.full(len(idx), float(std_m)),  # type: ignore[misc]
+                            np.asarray(stamps_ns, dtype=np.int64)[idx], self.config.accel_std_mps2)
+        return ok
 
     def prune(self, now_ns: int) -> list[Track]:
         """Remove tracks unseen for ``remove_after_s`` and return them."""
