@@ -385,13 +385,16 @@ def _slots_for(views: Mapping[str, PersonView], b: int, spec: GraphSpec, st: _St
     return list(enumerate(order))
 
 
-def build_batch(view_sets: Sequence[Mapping[str, PersonView]], site: Site, spec: GraphSpec) -> GraphBatch:
+def build_batch(view_sets: Sequence[Mapping[str, PersonView]], site: Site, spec: GraphSpec, adjacency: bool = True) -> GraphBatch:
     """Build the superbody graphs of a batch of people.
 
     Args:
         view_sets: per person, camera id -> that camera's view of the person (1 or more).
         site: the cameras' calibration (image sizes, and rays for the "rays" variant).
         spec: the graph layout the model takes.
+        adjacency: False leaves the edges out: ``adj`` is then a read-only all-zero view, for
+            models that take their edges from ``mask`` (``masked_adjacency``; metadata
+            ``model.reads_adj`` "false"), which spares building (B, R, N, N) floats.
 
     Returns:
         The batch: x (B, N, F), adj (B, R, N, N), mask (B, N), all float32.
@@ -501,6 +504,8 @@ def build_batch(view_sets: Sequence[Mapping[str, PersonView]], site: Site, spec:
     mask = np.concatenate([np.ones((B, 1), np.float32), mask.reshape(B, S * SLOT_SIZE)], axis=1)  # (B, N)
     x = np.concatenate([np.zeros((B, 1, F), np.float32), x.reshape(B, S * SLOT_SIZE, F)], axis=1)  # (B, N, F)
     x += st.node_x * mask[:, :, None]
+    if not adjacency:
+        return GraphBatch(x=x, adj=np.broadcast_to(np.zeros((), np.float32), (B, NUM_RELATIONS, N, N)), mask=mask)
     # An edge of the template exists iff both its ends are present: m_dst * m_src.
     present_edges = mask.take(st.edge_dst, axis=1)  # (B, E)
     present_edges *= mask.take(st.edge_src, axis=1)
