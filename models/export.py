@@ -371,3 +371,21 @@ def reexport(src: str | Path, dst: str | Path, fast: bool = True, opset: int = 1
     onnx.save(proto, str(dst))
     tmp.unlink()
     return dst
+
+
+if __name__ == "__main__":
+    # python -m superbody.models.export models/wtf-apartment.fp32.onnx [...]: re-export shipped
+    # fp32 models in place (e.g. as the fast GAT), keeping their metadata.
+    import argparse
+    import sys
+
+    p = argparse.ArgumentParser(description="Export fp32 pose models again (as the fast GAT by default), in place, keeping their metadata.")
+    p.add_argument("models", nargs="+", type=Path, help="fp32 .onnx files written by export_onnx")
+    p.add_argument("--dense", action="store_true", help="the training graph instead of the fast GAT")
+    a = p.parse_args()
+    for m in a.models:
+        if not m.is_file():
+            print(f"superbody export: error: {m}: no such file", file=sys.stderr)
+            sys.exit(2)
+        reexport(m, m, fast=not a.dense)
+        print(f"{m}: {read_metadata(m)[META_EXPORT_FORMULATION]}")

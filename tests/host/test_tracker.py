@@ -655,3 +655,26 @@ def test_set_positions_equals_set_position_one_by_one():
     assert list(got) == [*expect, False]
     for i in ids:
         assert np.allclose(a.track(i).position, b.track(i).position) and a.track(i).position_stamp_ns == b.track(i).position_stamp_ns
+
+
+def test_position_filter_written_out_equals_the_textbook_one():
+    # The tracker's per-element Kalman steps against host.filter's matrix ones, on random states.
+    from superbody.host.filter import predict, update, white_accel_noise
+    from superbody.host.tracker import _predict_positions, _update_positions
+
+    rng = np.random.default_rng(4)
+    B = 7
+    x = rng.normal(size=(B, 2, 2))
+    A = rng.normal(size=(B, 2, 2))
+    P = A @ A.transpose(0, 2, 1) + 0.1 * np.eye(2)  # (B, 2, 2) symmetric positive definite
+    dt = rng.uniform(0.0, 1.5, B)
+    F = np.zeros((B, 2, 2))
+    F[:, 0, 0] = F[:, 1, 1] = 1.0
+    F[:, 0, 1] = dt
+    xe, Pe = predict(x, P, F, white_accel_noise(dt, 2.0))
+    xg, Pg = _predict_positions(x, P, dt, 2.0)
+    assert np.allclose(xg, xe, atol=1e-12) and np.allclose(Pg, Pe, atol=1e-12)
+    z, R = rng.normal(size=(B, 2)), rng.uniform(0.01, 1.0, B)
+    xe, Pe = update(xe, Pe, z[:, None, :], np.array([[1.0, 0.0]]), R[:, None, None])
+    xg, Pg = _update_positions(xg, Pg, z, R)
+    assert np.allclose(xg, xe, atol=1e-12) and np.allclose(Pg, Pe, atol=1e-12)
