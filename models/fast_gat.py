@@ -19,8 +19,10 @@ shipped 3-layer, 4-slot model, the attention work drops from 3 x 73 x 73 to 72 x
 + 5 + 5 score pairs per head, about 10 x fewer.
 
 The module takes the trained ``GAT`` (its parameters are shared, not copied) and the same
-inputs (x, adj, mask); it reads ``adj`` only inside the template's blocks, so it needs the
-graphs the host builds, not arbitrary adjacency. It exists for export (``models.export``).
+inputs (x, adj, mask), but does not read ``adj``: an edge is a template edge whose two ends are
+present, ``adj == host.graph.masked_adjacency(spec, mask)``, which holds for every graph
+``build_batch`` makes and every graph the models are trained on, not for arbitrary adjacency.
+It exists for export (``models.export``; metadata ``model.reads_adj`` "false").
 
 Shapes: B graphs, S slots of Q = 18 nodes (body first), H heads of Dh features, D = H Dh.
 """
