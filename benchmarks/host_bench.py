@@ -1,9 +1,9 @@
 """Host speed: observation -> pose latency and the highest sustained observation rate, one core.
 
-    python benchmarks/host_bench.py [--model models/site-independent.int8.onnx] [--seconds 6]
-                                    [--zenoh] [--json-out F]
+    python benchmarks/host_bench.py [--model models/site-independent.fp32.onnx] [--seconds 6]
+                                    [--configs 3x10,10x10] [--cpu-time] [--zenoh] [--json-out F]
 
-For 3, 6 and 10 cameras x 1, 5 and 10 people: a ring of cameras (30 fps) around an 8 x 6 m
+For 3, 6 and 10 cameras x 1, 5 and 10 people (or ``--configs``): a ring of cameras (30 fps) around an 8 x 6 m
 room, simulated people, every camera's observations encoded beforehand. Then, with this
 process pinned to one core:
 
@@ -77,13 +77,17 @@ def frames(site: Site, people: int, seconds: float, t0_ns: int) -> list[tuple[in
     return out
 
 
+CLOCK = time.perf_counter  # main(cpu_time=True) swaps in time.thread_time
+
+
 def processing(site: Site, estimator, name: str, data: list, speed: float) -> dict:
     """The host loop on measured costs, observations arriving at ``speed`` x their real rate.
 
     A queue simulation on this core: observations arrive at (capture - first capture) / speed;
     the host drains every observation that has arrived (decode and validate, tracker), then
     steps (set S, graphs, one ONNX call, filter) and encodes the PoseArray; each step's cost is
-    measured with perf_counter and advances the clock. Latency = publication - arrival.
+    measured with perf_counter (``--cpu-time``: this thread's CPU time, which other processes
+  sharing the core do not inflate: a dedicated core's cost) and advances the clock. Latency = publication - arrival.
     """
     agg = Aggregator(site, estimator, name)
     keys = {c.id: transport.observation_key(site.name, c.id) for c in site.cameras}
@@ -92,12 +96,12 @@ def processing(site: Site, estimator, name: str, data: list, speed: float) -> di
     while i < len(data):
         now = max(now, arrive[i])
         j = int(np.searchsorted(arrive, now, side="right"))
-        t = time.perf_counter()
+        t = CLOCK()
         for stamp, cam, payload in data[i:j]:
             agg.ingest(payload, keys[cam], stamp)
         arr = agg.step(data[j - 1][0])
         pose_msg.encode(arr)
-        now += time.perf_counter() - t
+        now += CLOCK() - t
         lat[i:j] = now - arrive[i:j]
         people.append(len(arr.people))
         batches += 1
@@ -182,21 +186,36 @@ def over_zenoh(site: Site, model: str | None, people: int, seconds: float, gen_s
     return {"e2e_p50_ms": float(np.percentile(lat, 50)), "e2e_p99_ms": float(np.percentile(lat, 99)), "observations": int(ok.sum())}
 
 
-def main(model: str | None, seconds: float, use_zenoh: bool, json_out: str | None) -> int:
+def _configs(text: str) -> list[tuple[int, int]]:
+    try:
+        out = [tuple(int(v) for v in c.lower().split("x")) for c in text.split(",")]
+        if all(len(c) == 2 and 1 <= c[0] <= 64 and 1 <= c[1] <= 64 for c in out):
+            return out  # type: ignore[return-value]
+    except ValueError:
+        pass
+    raise argparse.ArgumentTypeError(f"--configs must be CAMERASxPEOPLE pairs, each 1 to 64, comma-separated, got {text!r}")
+
+
+def main(model: str | None, seconds: float, use_zenoh: bool, json_out: str | None,
+         configs: list[tuple[int, int]] | None = None, cpu_time: bool = False) -> int:
+    global CLOCK
+    CLOCK = time.thread_time if cpu_time else time.perf_counter
     os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})  # one core for the in-process measurement
     if model and not Path(model).is_file():
         print(f"no model at {model}: using the analytic estimator", file=sys.stderr)
         model = None
     results = {}
-    print(f"estimator: {Path(model).name if model else 'analytic'}; {FPS:.0f} fps per camera; one core")
+    print(f"estimator: {Path(model).name if model else 'analytic'}; {FPS:.0f} fps per camera; one core; "
+          f"costs in {'thread CPU time' if cpu_time else 'wall time'}; load average {os.getloadavg()[0]:.2f}")
     header = f"{'cameras':>7} {'people':>6} {'obs/s':>6} {'p50 ms':>7} {'p99 ms':>7} {'obs/step':>8} {'tracked':>7} {'max sustained obs/s':>19}"
     if use_zenoh:
         header += f" {'e2e p50':>8} {'e2e p99':>8}"
     print(header)
-    for n in (3, 6, 10):
+    configs = configs or [(n, people) for n in (3, 6, 10) for people in (1, 5, 10)]
+    for n in sorted({n for n, _ in configs}):
         site = ring_site(n)
         estimator, name = build_estimator(site, "onnx" if model else "analytic", model)
-        for people in (1, 5, 10):
+        for people in [p for c, p in configs if c == n]:
             t_gen = time.monotonic()
             data = frames(site, people, seconds, 1_700_000_000 * 10**9)
             gen_s = time.monotonic() - t_gen
@@ -219,9 +238,11 @@ def main(model: str | None, seconds: float, use_zenoh: bool, json_out: str | Non
 
 if __name__ == "__main__":
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--model", default=str(model_path("site-independent.int8.onnx")), help="a rays-variant model")
+    p.add_argument("--model", default=str(model_path("site-independent.fp32.onnx")), help="a rays-variant model")
     p.add_argument("--seconds", type=float, default=6.0, help="simulated seconds per configuration")
     p.add_argument("--zenoh", action="store_true", help="also measure end to end over loopback Zenoh, host in its own process")
+    p.add_argument("--configs", type=_configs, help="cameras x people to run, e.g. 3x10,10x10 (default: 3, 6, 10 x 1, 5, 10)")
+    p.add_argument("--cpu-time", action="store_true", help="cost each step in this thread's CPU time, not wall time (a shared machine)")
     p.add_argument("--json-out")
     a = p.parse_args()
-    sys.exit(main(a.model, a.seconds, a.zenoh, a.json_out))
+    sys.exit(main(a.model, a.seconds, a.zenoh, a.json_out, a.configs, a.cpu_time))

@@ -39,7 +39,7 @@ from superbody.edge.site import Site
 from superbody.host import pose as pose_msg
 from superbody.host import status as host_status
 from superbody.host.estimator import Estimator, estimate_detailed
-from superbody.host.filter import FilterConfig, PoseFilter
+from superbody.host.filter import FilterConfig, PoseFilter, update_many
 from superbody.host.tracker import Tracker, TrackerConfig
 
 __all__ = ["HostConfig", "Aggregator", "run_host", "confidence"]
@@ -95,7 +95,8 @@ def confidence(views: dict[str, PersonView]) -> float:
     The sum over views of the detected joints' scores, over 25 (a person seen whole by one
     camera and half by another scores about 1). Use the covariance for uncertainty in metres.
     """
-    total = sum(float(np.nansum(v.keypoints[:, 2])) for v in views.values())
+    scores = np.concatenate([v.keypoints[:, 2] for v in views.values()]) if views else np.zeros(0)  # one pass for all views
+    total = float(scores[np.isfinite(scores)].sum(dtype=np.float64))  # nansum, without its copy
     return float(min(1.0, total / 25.0))
 
 
@@ -193,22 +194,26 @@ class Aggregator:
         newest = {tid: max(self.tracker.track(tid).views[c].stamp_ns for c in views) for tid, views in sets.items()}
         todo = [tid for tid in sets if newest[tid] > self._last_input.get(tid, -1)]
         if todo:
-            est = estimate_detailed(self.estimator, [sets[tid] for tid in todo], self._source)  # one batched call
-            for tid, (x, y, yaw), std, source in zip(todo, est.pose, est.std, est.source):
+            # Every person whose views changed since their last estimate, once, in one batched call.
+            est = estimate_detailed(self.estimator, [sets[tid] for tid in todo], self._source)
+            for tid in todo:
                 self._last_input[tid] = newest[tid]
-                if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(yaw)):
-                    self.rejected["no_estimate"] += 1
-                    continue
-                f = self._filters.setdefault(tid, PoseFilter(self.config.filter))
-                # The estimator's own sigma is the measurement noise: a poor single-view yaw moves a track less.
-                meas_std = tuple(float(s) for s in std) if np.all(np.isfinite(std)) and np.all(std > 0) else None
-                fp = f.update(newest[tid], float(x), float(y), float(yaw), meas_std)
-                self.tracker.set_position(tid, (fp.x, fp.y), newest[tid])
+            ok = np.isfinite(est.pose).all(axis=1)  # (B,)
+            if not ok.all():
+                self.rejected["no_estimate"] += int((~ok).sum())
+            rows = np.flatnonzero(ok)
+            tids = [todo[i] for i in rows]
+            stamps = [newest[tid] for tid in tids]
+            filters = [self._filters.setdefault(tid, PoseFilter(self.config.filter)) for tid in tids]
+            # The estimator's own sigma is the measurement noise: a poor single-view yaw moves a track less.
+            fps = update_many(filters, stamps, est.pose[rows], est.std[rows])
+            self.tracker.set_positions(tids, [(fp.x, fp.y) for fp in fps], stamps)
+            for i, tid, fp in zip(rows, tids, fps):
                 views = sets[tid]
                 self._poses[tid] = (pose_msg.PersonPose(
                     id=tid, x=fp.x, y=fp.y, yaw=fp.yaw, vx=fp.vx, vy=fp.vy, yaw_rate=fp.yaw_rate,
-                    cov=np.asarray(fp.cov), confidence=confidence(views), cameras=tuple(sorted(views)),
-                    stamp_ns=newest[tid], views=len(views), estimator=source,
+                    cov=fp.cov, confidence=confidence(views), cameras=tuple(sorted(views)),
+                    stamp_ns=newest[tid], views=len(views), estimator=est.source[i],
                 ), newest[tid])
         people = tuple(p for tid, (p, _) in sorted(self._poses.items()) if tid in sets)
         self._seq += 1

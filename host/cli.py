@@ -23,10 +23,13 @@ ESTIMATORS = ("auto", "hybrid", "onnx", "analytic")
 
 
 def default_model(site: Site) -> Path | None:
-    """The shipped int8 model for the site (``models/<site>.int8.onnx``, package data), if there is one."""
+    """The shipped model for the site (package data), if there is one: ``models/<site>.fp32.onnx``,
+    else ``models/<site>.int8.onnx``. The fp32 file is the default because it is both exact and
+    the fastest (exported as the fast GAT, models.fast_gat; int8 costs more than it saves on
+    these small products: docs/scaling.md)."""
     from superbody.edge.resources import model_path
 
-    return model_path(f"{site.name}.int8.onnx")
+    return model_path(f"{site.name}.fp32.onnx") or model_path(f"{site.name}.int8.onnx")
 
 
 def build_estimator(site: Site, kind: str = "auto", model: str | Path | None = None):
@@ -48,7 +51,7 @@ def build_estimator(site: Site, kind: str = "auto", model: str | Path | None = N
         raise ValueError(f"unknown estimator {kind!r}; valid estimators: {', '.join(ESTIMATORS)}")
     path = Path(model) if model else default_model(site)
     if path is None:
-        raise ValueError(f"no model given and no shipped model models/{site.name}.int8.onnx; "
+        raise ValueError(f"no model given and no shipped model models/{site.name}.fp32.onnx or .int8.onnx; "
                          "pass --model M.onnx or --estimator analytic")
     if not path.is_file():
         raise ValueError(f"--model {path}: no such file")
@@ -138,7 +141,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--site", required=True, help="site file (TOML)")
     p.add_argument("--estimator", choices=ESTIMATORS, default="auto",
                    help="pose estimator (default auto: hybrid when the model carries a hybrid calibration, else the network alone)")
-    p.add_argument("--model", help="ONNX model (default: the shipped models/<site>.int8.onnx)")
+    p.add_argument("--model", help="ONNX model (default: the shipped models/<site>.fp32.onnx)")
     p.add_argument("--freshness", type=positive, default=0.5, help="seconds a camera's view stays in set S (default 0.5)")
     p.add_argument("--d-max", type=_unit, default=0.65, help="colour match threshold, Bhattacharyya distance (default 0.65)")
     p.add_argument("--no-geometry", action="store_true", help="match on colour only, as the paper (no ground-point gate)")

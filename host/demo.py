@@ -2,7 +2,7 @@
 
 Starts a Zenoh router on loopback, one simulated camera node per camera of the site (separate
 processes, sharing the world clock and seed, so they see the same simulated people) and the
-host with the shipped int8 model, then watches the people it publishes: a live table (id, x, y,
+host with the shipped fp32 model, then watches the people it publishes: a live table (id, x, y,
 yaw, cameras, error against the simulated truth) and, on exit, a summary.
 
 The truth: the demo builds the same simulated world from the same site and seed. For every
@@ -352,8 +352,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--port", type=int_in(0, 65535, "--port"), default=DEMO_PORT,
                    help=f"loopback port of the demo's Zenoh router (default {DEMO_PORT}, not zenohd's 7447; 0: any free port)")
     p.add_argument("--estimator", choices=("auto", "hybrid", "onnx", "analytic"), default="auto",
-                   help="pose estimator (default auto: the shipped int8 model, fused with geometry when it carries a hybrid calibration)")
-    p.add_argument("--model", help="ONNX model (default: models/<site>.int8.onnx)")
+                   help="pose estimator (default auto: the shipped fp32 model, fused with geometry when it carries a hybrid calibration)")
+    p.add_argument("--model", help="ONNX model (default: models/<site>.fp32.onnx)")
     p.add_argument("--kill-camera", metavar="ID", help="kill this camera's process mid-run (fault injection)")
     p.add_argument("--kill-at", type=positive, default=10.0, help="simulated second at which to kill it (default 10)")
     p.add_argument("--no-table", action="store_true", help="no live table, only the summary")

@@ -47,6 +47,7 @@ __all__ = [
     "OUTPUT_NAME",
     "STD_OUTPUT_NAME",
     "META_STD_SCALE",
+    "META_READS_ADJ",
 ]
 
 # The exported models' interface and metadata keys (written by models/export.py).
@@ -59,6 +60,7 @@ META_POSE_SCALE: Final[str] = "pose.scale"  # metres per unit of the network's r
 META_POSE_ORIGIN: Final[str] = "pose.origin"  # JSON [x, y]: origin of the raw output (informative)
 META_MODEL_CONFIG: Final[str] = "model.config"  # JSON: arch and hyper-parameters
 META_TRAIN_CONFIG: Final[str] = "train.config"  # JSON: the training run's config
+META_READS_ADJ: Final[str] = "model.reads_adj"  # "false": the model takes its edges from mask (adj may be all zero); absent = "true"
 POSE_FRAMES: Final[tuple[str, ...]] = ("world", "floor_centre")
 
 log = logging.getLogger("superbody.host")
@@ -154,6 +156,9 @@ class OnnxEstimator:
         self._check(site, variant)
         self.origin = floor_centre(site) if self.frame == "floor_centre" else np.zeros(2)
         self._inputs = [i.name for i in self.session.get_inputs()]
+        # A model that takes its edges from the mask is fed an all-zero adj: one reused buffer.
+        self.reads_adj = self.metadata.get(META_READS_ADJ, "true") != "false"
+        self._zero_adj = np.zeros((0, self.spec.num_relations, self.spec.num_nodes, self.spec.num_nodes), np.float32)
         self.has_std = STD_OUTPUT_NAME in [o.name for o in self.session.get_outputs()]
         try:
             # [kx, ky, kyaw] for every person, or one such row per camera count 1, 2, 3+.
@@ -233,7 +238,12 @@ class OnnxEstimator:
         """
         if len(view_sets) == 0:
             return np.zeros((0, 3)), np.zeros((0, 3))
-        feeds = build_batch(view_sets, self.site, self.spec).feeds()
+        feeds = build_batch(view_sets, self.site, self.spec, adjacency=self.reads_adj).feeds()
+        if not self.reads_adj:
+            B = len(view_sets)
+            if len(self._zero_adj) < B:
+                self._zero_adj = np.zeros((max(B, 2 * len(self._zero_adj)), *self._zero_adj.shape[1:]), np.float32)
+            feeds["adj"] = self._zero_adj[:B]
         names = [OUTPUT_NAME, STD_OUTPUT_NAME] if self.has_std else [OUTPUT_NAME]
         outs = self.session.run(names, {name: feeds[name] for name in self._inputs})
         pose = decode_output(outs[0], self.origin)

@@ -15,13 +15,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
 from superbody.edge.angles import wrap_angle
 
-__all__ = ["predict", "update", "white_accel_noise", "FilterConfig", "FilteredPose", "PoseFilter"]
+__all__ = ["predict", "update", "white_accel_noise", "FilterConfig", "FilteredPose", "PoseFilter", "update_many"]
 
 _NS = 1e-9
 
@@ -283,3 +284,74 @@ class PoseFilter:
             stamp_ns=t_ns, x=float(xs[0]), y=float(xs[1]), yaw=float(xs[2]),
             vx=float(xs[3]), vy=float(xs[4]), yaw_rate=float(xs[5]), cov=P[:3, :3].copy(),
         )
+
+
+def update_many(
+    filters: Sequence[PoseFilter], t_ns: Sequence[int], pose: NDArray, meas_std: NDArray | None = None,
+) -> list[FilteredPose]:
+    """``filters[i].update(t_ns[i], *pose[i], meas_std[i])`` for every i, the common case in one pass.
+
+    A host step updates every person it estimated: stacking the filters that take the plain
+    predict + update path (enabled, a state, a measurement neither older than it nor after a
+    reset gap) makes that one batch of 6 x 6 products instead of one small batch per person.
+    The others (first measurement, reset, late, pass-through, bad input) go through
+    ``PoseFilter.update`` one by one, which also raises on bad input exactly as it does.
+
+    Args:
+        filters: B filters (distinct).
+        t_ns: (B,) capture times, UNIX nanoseconds.
+        pose: (B, 3) measured (x, y, yaw).
+        meas_std: (B, 3) 1-sigma per measurement; a row that is not 3 finite positive numbers
+            (or None for all) means the filter's configured default.
+
+    Returns:
+        The B filtered poses, in order.
+    """
+    pose = np.asarray(pose, dtype=np.float64).reshape(-1, 3)
+    B = len(filters)
+    if len(pose) != B or len(t_ns) != B:
+        raise ValueError(f"update_many: {B} filters, {len(t_ns)} stamps and {len(pose)} poses must match")
+    stds: list[tuple[float, float, float] | None] = [None] * B
+    if meas_std is not None:
+        ms = np.asarray(meas_std, dtype=np.float64).reshape(B, 3)
+        good = np.isfinite(ms).all(axis=1) & (ms > 0).all(axis=1)
+        stds = [tuple(map(float, ms[i])) if good[i] else None for i in range(B)]  # type: ignore[misc]
+    out: list[FilteredPose | None] = [None] * B
+    batch: list[int] = []
+    finite = np.isfinite(pose).all(axis=1)
+    for i, f in enumerate(filters):
+        t = int(t_ns[i])
+        if f.config.enabled and finite[i] and f._t is not None and f._t <= t and (t - f._t) * _NS <= f.config.reset_after_s:
+            batch.append(i)
+        else:
+            out[i] = f.update(t, float(pose[i, 0]), float(pose[i, 1]), float(pose[i, 2]), stds[i])
+    if batch:
+        fs = [filters[i] for i in batch]
+        n = len(fs)
+        t = np.array([int(t_ns[i]) for i in batch], dtype=np.int64)
+        dt = (t - np.array([f._t for f in fs], dtype=np.int64)) * _NS  # (n,)
+        sig = np.array([(f.config.accel_std_mps2, f.config.accel_std_mps2, f.config.yaw_accel_std_radps2) for f in fs])  # (n, 3)
+        std = np.array([stds[i] or (filters[i].config.meas_std_xy_m, filters[i].config.meas_std_xy_m, filters[i].config.meas_std_yaw_rad)
+                        for i in batch])  # (n, 3)
+        x = np.stack([f._x for f in fs])[:, :, None]  # (n, 6, 1)
+        P = np.stack([f._P for f in fs])  # (n, 6, 6)
+        F = np.broadcast_to(np.eye(6), (n, 6, 6)).copy()
+        F[:, [0, 1, 2], [3, 4, 5]] = dt[:, None]  # (n, 6, 6): position i += dt * its rate
+        # Q per axis i: sigma_i^2 [[dt^4/4, dt^3/2], [dt^3/2, dt^2]] on (i, i + 3)
+        q = white_accel_noise(dt, 1.0)  # (n, 2, 2)
+        Q = np.zeros((n, 6, 6))
+        for i in range(3):
+            Q[:, i :: 3, i :: 3] = (sig[:, i] ** 2)[:, None, None] * q
+        x, P = predict(x, P, F, Q)
+        x[:, 2, 0] = wrap_angle(x[:, 2, 0])
+        yaw = wrap_angle(pose[batch, 2])  # (n,)
+        # Unwrap each yaw measurement next to its predicted yaw: the innovation stays in (-pi, pi].
+        z = np.stack([pose[batch, 0], pose[batch, 1], x[:, 2, 0] + wrap_angle(yaw - x[:, 2, 0])], axis=1)[:, :, None]  # (n, 3, 1)
+        R = np.zeros((n, 3, 3))
+        R[:, [0, 1, 2], [0, 1, 2]] = np.square(std)
+        x, P = update(x, P, z, _H, R)
+        x[:, 2, 0] = wrap_angle(x[:, 2, 0])
+        for k, (i, f) in enumerate(zip(batch, fs)):
+            f._t, f._x, f._P = int(t[k]), x[k, :, 0], P[k]
+            out[i] = f._pose(f._t, f._x, f._P)
+    return out  # type: ignore[return-value]

@@ -52,7 +52,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from superbody.edge.body import KEYPOINTS, MIRROR, NUM_KEYPOINTS, PARENT, TYPICAL_HEIGHT_M
-from superbody.edge.camera import pixel_to_ray
+from superbody.edge.camera import undistort
 from superbody.edge.observation import PersonView
 from superbody.edge.site import Site
 
@@ -367,7 +367,7 @@ def masked_adjacency(spec: GraphSpec, mask: NDArray) -> NDArray[np.float32]:
 
 
 def _slots_for(views: Mapping[str, PersonView], b: int, spec: GraphSpec, st: _Static, site_index: dict[str, int]) -> list[tuple[int, str]]:
-    """(slot, camera id) for each view of one person."""
+    """(slot, camera id) for each view of one person; "rays": every view, in site order (``_keep_best`` trims)."""
     known = st.slot_of if spec.variant == "site" else site_index
     for cid in views:
         if cid not in known:
@@ -377,21 +377,45 @@ def _slots_for(views: Mapping[str, PersonView], b: int, spec: GraphSpec, st: _St
             )
     if spec.variant == "site":
         return [(st.slot_of[cid], cid) for cid in views]
-    order = sorted(views, key=site_index.__getitem__)
-    if len(order) > spec.max_views:
-        # Keep the views with the most detected joints (ties: site order), then in site order.
-        keep = sorted(order, key=lambda c: -int(np.isfinite(views[c].keypoints[:, 0]).sum()))[: spec.max_views]
-        order = [c for c in order if c in keep]
-    return list(enumerate(order))
+    return list(enumerate(sorted(views, key=site_index.__getitem__)))
 
 
-def build_batch(view_sets: Sequence[Mapping[str, PersonView]], site: Site, spec: GraphSpec) -> GraphBatch:
+def _keep_best(view_sets: Sequence[Mapping[str, PersonView]], slots: list[list[tuple[int, str]]], max_views: int) -> None:
+    """"rays": trim each person's views (in site order) to the ``max_views`` with the most
+    detected joints (ties: site order), kept in site order; visible joints counted in one pass."""
+    over = [b for b, sl in enumerate(slots) if len(sl) > max_views]
+    if not over:
+        return
+    kp_u = np.stack([view_sets[b][cid].keypoints[:, 0] for b in over for _, cid in slots[b]])  # (n, 17)
+    counts = np.isfinite(kp_u).sum(axis=1).tolist()  # (n,)
+    k = 0
+    for b in over:
+        order = [cid for _, cid in slots[b]]
+        n_vis = dict(zip(order, counts[k : k + len(order)]))
+        k += len(order)
+        keep = set(sorted(order, key=lambda c: -n_vis[c])[:max_views])  # stable: ties keep site order
+        slots[b] = list(enumerate(c for c in order if c in keep))
+
+
+@lru_cache(maxsize=16)
+def _site_rays(site: Site) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+    """Per camera of the site: (fx, fy, cx, cy) (C, 4), R (C, 3, 3), t (C, 3), and whether it
+    has lens distortion (C,) (those go through ``edge.camera.undistort``)."""
+    cams = site.cameras
+    return (np.array([[c.fx, c.fy, c.cx, c.cy] for c in cams], dtype=np.float64), np.stack([c.R for c in cams]),
+            np.stack([c.t for c in cams]), np.array([bool(np.any(c.D)) for c in cams]))
+
+
+def build_batch(view_sets: Sequence[Mapping[str, PersonView]], site: Site, spec: GraphSpec, adjacency: bool = True) -> GraphBatch:
     """Build the superbody graphs of a batch of people.
 
     Args:
         view_sets: per person, camera id -> that camera's view of the person (1 or more).
         site: the cameras' calibration (image sizes, and rays for the "rays" variant).
         spec: the graph layout the model takes.
+        adjacency: False leaves the edges out: ``adj`` is then a read-only all-zero view, for
+            models that take their edges from ``mask`` (``masked_adjacency``; metadata
+            ``model.reads_adj`` "false"), which spares building (B, R, N, N) floats.
 
     Returns:
         The batch: x (B, N, F), adj (B, R, N, N), mask (B, N), all float32.
@@ -413,10 +437,15 @@ def build_batch(view_sets: Sequence[Mapping[str, PersonView]], site: Site, spec:
     boxes: list[NDArray] = []
     pts: list[NDArray] = []
     no_depth = np.full((J, 3), np.nan, dtype=np.float32)
+    slots: list[list[tuple[int, str]]] = []
     for b, views in enumerate(view_sets):
         if not views:
             raise ValueError(f"view set {b} is empty: a person needs at least one view")
-        for slot, cid in _slots_for(views, b, spec, st, site_index):
+        slots.append(_slots_for(views, b, spec, st, site_index))
+    if spec.variant == "rays":
+        _keep_best(view_sets, slots, spec.max_views)
+    for b, views in enumerate(view_sets):
+        for slot, cid in slots[b]:
             if cid not in site_index:
                 raise ValueError(f"camera {cid!r} of the graph spec is not in site {site.name!r}; cameras: {', '.join(site.camera_ids)}")
             v = views[cid]
@@ -457,19 +486,22 @@ def build_batch(view_sets: Sequence[Mapping[str, PersonView]], site: Site, spec:
         p3 = np.stack(pts).astype(np.float64) if V else np.zeros((0, J, 3))  # (V, 17, 3) camera frame
     if spec.variant == "rays" or spec.geometry:
         origin = np.array([*floor_centre(site), 0.0])  # (3,)
-        rays = np.zeros((V, SLOT_SIZE, 3))  # (V, 18, 3)
-        centres = np.zeros((V, 3))  # (V, 3)
-        for c in np.unique(c_idx):  # one pixel_to_ray call per camera
-            cam = site.cameras[c]
+        # Every present node's ray, all views at once: d = R [(u - cx)/fx, (v - cy)/fy, 1], unit
+        # (edge.camera.pixel_to_ray); cameras with lens distortion undistort their pixels first.
+        f_c, R_c, t_c, distorted = _site_rays(site)
+        k = f_c[c_idx]  # (V, 4)
+        xn = (uv - k[:, None, 2:]) / k[:, None, :2]  # (V, 18, 2) normalised image coordinates
+        for c in np.unique(c_idx[distorted[c_idx]]):
             sel = c_idx == c  # (V,)
             sub = present[sel]  # (v, 18)
-            _, d = pixel_to_ray(uv[sel][sub], cam)  # (n, 3)
-            r = np.zeros((int(sel.sum()), SLOT_SIZE, 3))
-            r[sub] = d
-            rays[sel] = r
-            centres[sel] = cam.t - origin
-            if spec.use_3d and spec.variant == "rays":
-                p3[sel] = p3[sel] @ cam.R.T + (cam.t - origin)  # world frame, floor-centred
+            x_c = xn[sel]
+            x_c[sub] = undistort(uv[sel][sub], site.cameras[c])
+            xn[sel] = x_c
+        d = np.einsum("vij,vnj->vni", R_c[c_idx], np.concatenate([xn, np.ones((V, SLOT_SIZE, 1))], axis=2))  # (V, 18, 3) world frame
+        rays = np.where(present[:, :, None], d / np.linalg.norm(d, axis=2, keepdims=True), 0.0)  # (V, 18, 3)
+        centres = t_c[c_idx] - origin  # (V, 3)
+        if spec.use_3d and spec.variant == "rays":
+            p3 = np.einsum("vij,vnj->vni", R_c[c_idx], p3) + centres[:, None]  # world frame, floor-centred
     if spec.variant == "rays":
         feats[:, :, st.cols["ray"]] = rays
         feats[:, :, st.cols["ray_origin"]] = centres[:, None]
@@ -501,6 +533,8 @@ def build_batch(view_sets: Sequence[Mapping[str, PersonView]], site: Site, spec:
     mask = np.concatenate([np.ones((B, 1), np.float32), mask.reshape(B, S * SLOT_SIZE)], axis=1)  # (B, N)
     x = np.concatenate([np.zeros((B, 1, F), np.float32), x.reshape(B, S * SLOT_SIZE, F)], axis=1)  # (B, N, F)
     x += st.node_x * mask[:, :, None]
+    if not adjacency:
+        return GraphBatch(x=x, adj=np.broadcast_to(np.zeros((), np.float32), (B, NUM_RELATIONS, N, N)), mask=mask)
     # An edge of the template exists iff both its ends are present: m_dst * m_src.
     present_edges = mask.take(st.edge_dst, axis=1)  # (B, E)
     present_edges *= mask.take(st.edge_src, axis=1)

@@ -24,13 +24,14 @@ fallback (higher joints sit closer to the camera's height).
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import Final, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from superbody.edge.body import INDEX, LEFT_HIP, LEFT_SHOULDER, RIGHT_HIP, RIGHT_SHOULDER, TYPICAL_HEIGHT_M
-from superbody.edge.camera import Camera, intersect_plane, pixel_to_ray
+from superbody.edge.camera import Camera, pixel_to_ray
 from superbody.edge.observation import PersonView
 
 __all__ = ["MAX_RANGE_M", "LEVELS", "Level", "ground_point", "ground_points"]
@@ -98,46 +99,58 @@ def ground_points(
     kp = np.asarray(keypoints, dtype=np.float64).reshape(-1, 17, 3)  # (N, 17, 3)
     bb = np.asarray(bboxes, dtype=np.float64).reshape(-1, 4)  # (N, 4)
     n, n_levels = len(kp), len(LEVELS)
+    dh, sigma_fixed, sigma_range, sigma_pixel = _camera_terms(cam)  # (L,) each
+    t = cam.t  # (3,)
     with np.errstate(invalid="ignore", divide="ignore"):
-        # Candidate pixel of each level: the mean of its visible joints, or the box's bottom centre.
+        # Candidate pixel of each level: the mean of its visible joints, or the box's bottom
+        # centre; then the box's top centre: (N, L + 1, 2), NaN where there is none.
         pts = kp[:, _JOINTS, :2]  # (N, 3, 2, 2)
         seen = ~np.isnan(pts[..., 0])  # (N, 3, 2)
-        uv_joints = np.where(seen[..., None], pts, 0.0).sum(axis=2) / seen.sum(axis=2)[..., None]  # (N, 3, 2), NaN if none
+        uv = np.empty((n, n_levels + 1, 2))
+        uv[:, : n_levels - 1] = np.where(seen[..., None], pts, 0.0).sum(axis=2) / seen.sum(axis=2)[..., None]  # NaN if none
         box_ok = (bb[:, 2] > bb[:, 0]) & (bb[:, 3] > bb[:, 1]) & (bb[:, 3] < cam.height - _EDGE_PX)  # False for NaN
-        u_box = 0.5 * (bb[:, 0] + bb[:, 2])
-        uv_box = np.where(box_ok[:, None], np.stack([u_box, bb[:, 3]], axis=1), np.nan)  # (N, 2) bottom centre
-        uv = np.concatenate([uv_joints, uv_box[:, None, :]], axis=1)  # (N, L, 2)
-        uv_top = np.where(box_ok[:, None], np.stack([u_box, bb[:, 1]], axis=1), np.nan)  # (N, 2) top centre
+        uv[:, n_levels - 1 :, 0] = np.where(box_ok, 0.5 * (bb[:, 0] + bb[:, 2]), np.nan)[:, None]
+        uv[:, n_levels - 1, 1] = np.where(box_ok, bb[:, 3], np.nan)  # bottom centre
+        uv[:, n_levels, 1] = np.where(box_ok, bb[:, 1], np.nan)  # top centre
 
-        # One batch of rays: every level's pixel (view-major), then the boxes' top centres.
-        flat = np.concatenate([uv.reshape(-1, 2), uv_top])  # (N*L + N, 2)
-        heights = np.concatenate([np.tile(_HEIGHT, n), np.zeros(n)])  # (N*L + N,)
+        # One batch of rays; where each level's ray meets its plane z = h: t + s d, s > 0.
+        flat = uv.reshape(-1, 2)  # (N (L + 1), 2)
         usable = ~np.isnan(flat).any(axis=1)
-        points = np.full((len(flat), 3), np.nan)
-        rays = np.full((len(flat), 3), np.nan)
-        valid = np.zeros(len(flat), dtype=bool)
+        d = np.full((len(flat), 3), np.nan)
         if usable.any():
-            origin, rays[usable] = pixel_to_ray(flat[usable], cam)
-            points[usable], valid[usable] = intersect_plane(origin, rays[usable], heights[usable])
-        points, valid, top = points[: n * n_levels], valid[: n * n_levels], rays[n * n_levels:]
-
-        dh = np.abs(cam.t[2] - _HEIGHT)  # (L,) camera height above each level's plane
-        r = np.hypot(points[:, 0] - cam.t[0], points[:, 1] - cam.t[1]).reshape(n, n_levels)  # (N, L)
-        valid = valid.reshape(n, n_levels) & (r <= max_range_m) & (dh >= _MIN_DH_M)
+            d[usable] = pixel_to_ray(flat[usable], cam)[1]
+        d = d.reshape(n, n_levels + 1, 3)  # (N, L + 1, 3)
+        s = (_HEIGHT - t[2]) / d[:, :n_levels, 2]  # (N, L)
+        valid = np.isfinite(s) & (s > 0)
+        points = t[:2] + s[..., None] * d[:, :n_levels, :2]  # (N, L, 2)
+        r = np.hypot(points[..., 0] - t[0], points[..., 1] - t[1])  # (N, L) horizontal range
+        valid &= (r <= max_range_m) & (dh >= _MIN_DH_M)
         # A box is a person's only if it spans a plausible body: the top edge's ray, at the
         # bottom point's range, must be at a person's height (a head-only box fails this).
-        top_height = cam.t[2] + top[:, 2] * r[:, -1] / np.hypot(top[:, 0], top[:, 1])  # (N,)
+        top = d[:, n_levels]  # (N, 3)
+        top_height = t[2] + top[:, 2] * r[:, -1] / np.hypot(top[:, 0], top[:, 1])  # (N,)
         clipped = bb[:, 1] <= _EDGE_PX  # head above the image: the height is unknown
         valid[:, -1] &= clipped | ((top_height >= _BOX_HEIGHT_M[0]) & (top_height <= _BOX_HEIGHT_M[1]))
-        dtheta = _PIXEL_STD / (0.5 * (cam.fx + cam.fy))  # (L,) pixel noise as an angle
-        # sigma^2 = body^2 + (r dz / dh)^2 + (dtheta (r^2 + dh^2) / dh)^2
-        sigma = np.sqrt(_BODY_STD**2 + (r * _HEIGHT_STD / dh) ** 2 + (dtheta * (r * r + dh * dh) / dh) ** 2)  # (N, L)
 
     level = np.where(valid.any(axis=1), np.argmax(valid, axis=1), -1).astype(np.int8)  # (N,) first that worked
     found = level >= 0
-    rows = np.arange(n) * n_levels + np.maximum(level, 0)  # (N,) row in the flat arrays
-    xy = np.where(found[:, None], points[rows, :2], np.nan)
-    return xy, np.where(found, sigma.reshape(-1)[rows], np.nan), level
+    rows = np.arange(n)
+    lv = np.maximum(level, 0)
+    r_used = r[rows, lv]  # (N,)
+    # sigma^2 = body^2 + (r dz / dh)^2 + (dtheta (r^2 + dh^2) / dh)^2
+    sigma = np.sqrt(sigma_fixed[lv] + (r_used * sigma_range[lv]) ** 2 + (sigma_pixel[lv] * (r_used * r_used + dh[lv] ** 2)) ** 2)
+    xy = np.where(found[:, None], points[rows, lv], np.nan)
+    return xy, np.where(found, sigma, np.nan), level
+
+
+@lru_cache(maxsize=256)
+def _camera_terms(cam: Camera) -> tuple[NDArray[np.float64], ...]:
+    """Per level (L,): the camera's height above its plane dh, and the error model's terms
+    body^2, dz / dh and dtheta / dh (see the module docstring)."""
+    dh = np.abs(cam.t[2] - _HEIGHT)  # (L,)
+    dtheta = _PIXEL_STD / (0.5 * (cam.fx + cam.fy))  # (L,) pixel noise as an angle
+    with np.errstate(divide="ignore"):
+        return dh, _BODY_STD**2, _HEIGHT_STD / dh, dtheta / dh
 
 
 def ground_point(view: PersonView, cam: Camera, max_range_m: float = MAX_RANGE_M) -> tuple[NDArray[np.float64], float] | None:

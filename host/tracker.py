@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Final, Literal, NamedTuple
+from typing import Final, Literal, NamedTuple, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -58,7 +58,6 @@ from superbody.edge.body import NUM_KEYPOINTS
 from superbody.edge.colour import HIST_BINS, bhattacharyya_matrix
 from superbody.edge.observation import Observation, PersonView
 from superbody.edge.site import Site
-from superbody.host.filter import predict, update, white_accel_noise
 from superbody.host.ground import ground_points
 from superbody.host.pose import MAX_PEOPLE
 
@@ -84,8 +83,6 @@ _CANDIDATE_COST = 0.1
 _REID_MARGIN = 0.1
 # Speed we assume for a track whose velocity is not yet known (1-sigma, m/s).
 _INIT_SPEED_STD = 1.0
-# Position Kalman filter: one (position, velocity) model shared by the x and y columns.
-_H = np.array([[1.0, 0.0]])  # (1, 2)
 
 
 def _check(name: str, value: object, lo: float, hi: float, *, lo_open: bool = False, integer: bool = False) -> None:
@@ -282,38 +279,73 @@ class Track:
 def _predict_positions(x: NDArray, P: NDArray, dt: NDArray, accel_std_mps2: float) -> tuple[NDArray, NDArray]:
     """Constant-velocity prediction of B position filters, each ``dt`` (B,) seconds ahead.
 
+    ``host.filter.predict`` with F = [[1, dt], [0, 1]] and the white-acceleration Q, written out
+    per element: the same numbers, without a batch of 2 x 2 matrix products per call.
+
     Args:
         x: (B, 2, 2) states, rows (position, velocity), columns (x, y).
         P: (B, 2, 2) covariances, shared by the x and y columns.
     """
-    F = np.zeros((len(dt), 2, 2))
-    F[:, 0, 0] = F[:, 1, 1] = 1.0
-    F[:, 0, 1] = dt  # (B, 2, 2): [[1, dt], [0, 1]]
-    return predict(x, P, F, white_accel_noise(dt, accel_std_mps2))
+    dt = np.asarray(dt, dtype=np.float64)[:, None]  # (B, 1)
+    q = accel_std_mps2 * accel_std_mps2
+    # x = F x: position += dt * velocity
+    x = np.stack([x[:, 0] + dt * x[:, 1], x[:, 1]], axis=1)  # (B, 2, 2)
+    # P = F P F^T + Q, Q = q [[dt^4/4, dt^3/2], [dt^3/2, dt^2]]
+    p00, p01, p10, p11 = P[:, 0, 0:1], P[:, 0, 1:2], P[:, 1, 0:1], P[:, 1, 1:2]  # (B, 1) each
+    dt2 = dt * dt
+    n00 = p00 + dt * (p01 + p10) + dt2 * p11 + q * dt2 * dt2 / 4
+    n01 = p01 + dt * p11 + q * dt2 * dt / 2
+    n10 = p10 + dt * p11 + q * dt2 * dt / 2
+    n11 = p11 + q * dt2
+    return x, np.concatenate([n00, n01, n10, n11], axis=1).reshape(-1, 2, 2)
 
 
-def _fuse_positions(tracks: list[Track], xy: NDArray, sigma: NDArray, t_ns: int, accel_std_mps2: float) -> None:
-    """Kalman-update the positions of ``tracks`` with floor points (B, 2) of 1-sigma (B,), seen at ``t_ns``."""
+def _update_positions(x: NDArray, P: NDArray, z: NDArray, R: NDArray) -> tuple[NDArray, NDArray]:
+    """``host.filter.update`` with H = [1, 0] (a position measured, both columns), per element.
+
+    Args:
+        x: (B, 2, 2) states; P: (B, 2, 2) covariances; z: (B, 2) measured (x, y); R: (B,) variances.
+    """
+    p00, p01, p10, p11 = P[:, 0, 0], P[:, 0, 1], P[:, 1, 0], P[:, 1, 1]  # (B,) each
+    # S = H P H^T + R;  K = P H^T / S
+    S = p00 + R
+    k0, k1 = p00 / S, p10 / S  # (B,)
+    # x = x + K (z - H x)
+    y = z - x[:, 0]  # (B, 2)
+    x = np.stack([x[:, 0] + k0[:, None] * y, x[:, 1] + k1[:, None] * y], axis=1)  # (B, 2, 2)
+    # P = (I - K H) P (I - K H)^T + K R K^T (Joseph form), with I - K H = [[1 - k0, 0], [-k1, 1]]
+    a = 1.0 - k0
+    n00 = a * a * p00 + k0 * k0 * R
+    n01 = a * (p01 - k1 * p00) + k0 * k1 * R
+    n10 = a * (p10 - k1 * p00) + k0 * k1 * R
+    n11 = k1 * k1 * p00 - k1 * (p01 + p10) + p11 + k1 * k1 * R
+    return x, np.stack([n00, n01, n10, n11], axis=1).reshape(-1, 2, 2)
+
+
+def _fuse_positions(tracks: list[Track], xy: NDArray, sigma: NDArray, t_ns: int | NDArray, accel_std_mps2: float) -> None:
+    """Kalman-update the positions of ``tracks`` with floor points (B, 2) of 1-sigma (B,), seen
+    at ``t_ns`` (one time, or (B,) one per track)."""
+    t_all = np.broadcast_to(np.asarray(t_ns, dtype=np.int64), (len(tracks),))  # (B,)
     seen = np.array([tr._kf_t is not None for tr in tracks], dtype=bool)
     for j in np.flatnonzero(~seen):  # first point: the velocity is unknown
         tr = tracks[j]
-        tr._kf_t = t_ns
+        tr._kf_t = int(t_all[j])
         tr._kf_x = np.vstack([xy[j], np.zeros(2)])
         tr._kf_P = np.diag([sigma[j] ** 2, _INIT_SPEED_STD**2])
     if not seen.any():
         return
     old = [tracks[j] for j in np.flatnonzero(seen)]
-    xy, sigma = xy[seen], sigma[seen]
+    xy, sigma, t_old = xy[seen], sigma[seen], t_all[seen]
     x = np.array([tr._kf_x for tr in old])  # (B, 2, 2)
     P = np.array([tr._kf_P for tr in old])  # (B, 2, 2)
-    dt = np.array([(t_ns - tr._kf_t) / _NS_PER_S for tr in old])  # (B,)
+    dt = (t_old - np.array([tr._kf_t for tr in old], dtype=np.int64)) / _NS_PER_S  # (B,)
     x, P = _predict_positions(x, P, np.maximum(dt, 0.0), accel_std_mps2)
     # A point older than the state (another camera's frame came late) is applied at the state's
     # time, with the distance the person may have walked since as extra noise.
-    R = (sigma**2 + (_INIT_SPEED_STD * np.minimum(dt, 0.0)) ** 2)[:, None, None]  # (B, 1, 1)
-    x, P = update(x, P, xy[:, None, :], _H, R)
+    R = sigma**2 + (_INIT_SPEED_STD * np.minimum(dt, 0.0)) ** 2  # (B,)
+    x, P = _update_positions(x, P, xy, R)
     for j, tr in enumerate(old):
-        tr._kf_x, tr._kf_P, tr._kf_t = x[j], P[j], max(tr._kf_t, t_ns)
+        tr._kf_x, tr._kf_P, tr._kf_t = x[j], P[j], max(tr._kf_t, int(t_old[j]))
 
 
 @dataclass(frozen=True)
@@ -707,6 +739,23 @@ class Tracker:
             return False
         _fuse_positions([tr], xy[None], np.array([float(std_m)]), int(stamp_ns), self.config.accel_std_mps2)
         return True
+
+    def set_positions(self, track_ids: Sequence[int], xy: NDArray, stamps_ns: Sequence[int], std_m: float = 0.1) -> NDArray[np.bool_]:
+        """``set_position`` for many tracks at once (one Kalman batch): ids (B,), xy (B, 2), stamps (B,).
+
+        Returns:
+            (B,) bool, False where there is no such track or the point is not finite.
+        """
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        if not (std_m > 0 and math.isfinite(std_m)):
+            return np.zeros(len(xy), dtype=bool)
+        tracks = [self._tracks.get(int(i)) for i in track_ids]
+        ok = np.array([tr is not None for tr in tracks], dtype=bool) & np.isfinite(xy).all(axis=1)
+        if ok.any():
+            idx = np.flatnonzero(ok)
+            _fuse_positions([tracks[i] for i in idx], xy[idx], np.full(len(idx), float(std_m)),  # type: ignore[misc]
+                            np.asarray(stamps_ns, dtype=np.int64)[idx], self.config.accel_std_mps2)
+        return ok
 
     def prune(self, now_ns: int) -> list[Track]:
         """Remove tracks unseen for ``remove_after_s`` and return them."""

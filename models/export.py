@@ -44,14 +44,20 @@ from superbody.host.estimator import (
     META_POSE_FRAME,
     META_POSE_ORIGIN,
     META_POSE_SCALE,
+    META_READS_ADJ,
     META_TRAIN_CONFIG,
     OUTPUT_NAME,
     STD_OUTPUT_NAME,
 )
 from superbody.host.graph import GraphBatch, GraphSpec
-from superbody.models.nets import PoseNet
+from superbody.models.fast_gat import FastGAT
+from superbody.models.nets import GAT, PoseNet, build_model
 
-__all__ = ["export_onnx", "quantize_int8", "read_metadata", "GraphBatchReader", "QUANTIZED_OPS", "KEEP_FP32"]
+# How the network was written out: "fast_gat" (models.fast_gat) or "dense" (the training graph).
+META_EXPORT_FORMULATION = "export.formulation"
+
+__all__ = ["export_onnx", "quantize_int8", "read_metadata", "load_onnx_model", "reexport", "GraphBatchReader", "QUANTIZED_OPS", "KEEP_FP32",
+           "META_EXPORT_FORMULATION"]
 
 # Only the products are quantised: they hold the arithmetic. Quantising every op (softmax,
 # the -1e9 attention mask, residual adds) wrecked a trained GAT (position error x9).
@@ -71,11 +77,13 @@ KEEP_FP32: dict[str, tuple[str, ...]] = {
 
 class _ExportedPose(nn.Module):
     """The network plus its output denormalisation: normalised (B, 7) -> pose in metres (B, 4)
-    and its 1-sigma (B, 3) (x, y metres, yaw radians)."""
+    and its 1-sigma (B, 3) (x, y metres, yaw radians). With ``fast``, a GAT runs as
+    ``models.fast_gat.FastGAT`` (same outputs, a fraction of the work)."""
 
-    def __init__(self, net: PoseNet):
+    def __init__(self, net: PoseNet, fast: bool = False):
         super().__init__()
         self.net = net
+        self.body: nn.Module = FastGAT(net) if fast and isinstance(net, GAT) else net
         s = net.scale
         ox, oy = net.origin if net.spec.variant == "site" else (0.0, 0.0)
         self.register_buffer("gain", torch.tensor([s, s, 1.0, 1.0]))
@@ -83,7 +91,7 @@ class _ExportedPose(nn.Module):
         self.register_buffer("std_gain", torch.tensor([s, s, 1.0]))
 
     def forward(self, x: torch.Tensor, adj: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        out = self.net(x, adj, mask)  # (B, 7)
+        out = self.body(x, adj, mask)  # (B, 7)
         pose = out[:, :4] * self.gain + self.offset  # (B, 4)
         std = torch.exp(out[:, 4:7].clamp(-12.0, 4.0)) * self.std_gain  # (B, 3)
         return pose, std
@@ -127,7 +135,7 @@ def _declare_all_inputs(proto: onnx.ModelProto, spec: GraphSpec) -> None:
     proto.graph.input.extend(inputs)
 
 
-def export_onnx(model: PoseNet, spec: GraphSpec, config: Mapping, path: str | Path, opset: int = 17) -> Path:
+def export_onnx(model: PoseNet, spec: GraphSpec, config: Mapping, path: str | Path, opset: int = 17, fast: bool = True) -> Path:
     """Write the model as fp32 ONNX with a dynamic batch axis and its metadata.
 
     Args:
@@ -136,6 +144,10 @@ def export_onnx(model: PoseNet, spec: GraphSpec, config: Mapping, path: str | Pa
         config: the training config to store (JSON-able; other values are stored as str()).
         path: the .onnx file to write.
         opset: ONNX opset.
+        fast: export a GAT as ``models.fast_gat.FastGAT``: the same outputs on the graphs
+            ``host.graph.build_batch`` makes, 3-5x faster; it reads the graph's edges from
+            ``mask`` (``adj`` stays an input, unread: metadata ``model.reads_adj`` "false").
+            Other architectures export as they are.
 
     Returns:
         The path written.
@@ -145,7 +157,8 @@ def export_onnx(model: PoseNet, spec: GraphSpec, config: Mapping, path: str | Pa
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     was_training = model.training
-    wrapper = _ExportedPose(model).eval()
+    wrapper = _ExportedPose(model, fast=fast).eval()
+    formulation = "fast_gat" if isinstance(wrapper.body, FastGAT) else "dense"
     B = 2  # any size: the batch axis is exported as dynamic
     example = (
         torch.rand(B, spec.num_nodes, spec.num_features),
@@ -170,7 +183,10 @@ def export_onnx(model: PoseNet, spec: GraphSpec, config: Mapping, path: str | Pa
     proto.producer_name = "superbody"
     proto.doc_string = (f"superbody {model.arch} pose network; output pose (batch, 4) = x, y (m, frame: metadata pose.frame), "
                         "sin yaw, cos yaw; pose_std (batch, 3) = predicted 1-sigma of x, y (m) and yaw (rad)")
-    _set_metadata(proto, _metadata(model, spec, config))
+    meta = _metadata(model, spec, config)
+    meta[META_EXPORT_FORMULATION] = formulation
+    meta[META_READS_ADJ] = "false" if formulation == "fast_gat" or model.arch == "mlp" else "true"
+    _set_metadata(proto, meta)
     onnx.checker.check_model(proto)
     onnx.save(proto, str(path))
     return path
@@ -274,3 +290,102 @@ def _drift(fp32_path: Path, int8_path: Path, batches: list[dict[str, NDArray[np.
         "pos_mean_m": round(float(pos.mean()), 5), "pos_max_m": round(float(pos.max()), 5),
         "yaw_mean_deg": round(float(yaw.mean()), 3), "yaw_max_deg": round(float(yaw.max()), 3),
     }
+
+
+def load_onnx_model(path: str | Path, check_batch: GraphBatch | None = None) -> PoseNet:
+    """The PyTorch network inside an exported fp32 model (any formulation), from its metadata
+    (``model.config``, ``graph.*``) and weights, e.g. to export it again in another form.
+
+    Parameters come from the initializers of the same name, or, for the linear layers the
+    exporter turned into a bare MatMul, from that MatMul's weight (transposed). The result is
+    checked against the file under onnxruntime on ``check_batch`` (or a batch of random
+    present-node graphs): ``ValueError`` if they differ by more than 1e-4.
+    """
+    path = Path(path)
+    proto = onnx.load(str(path))
+    meta = {p.key: p.value for p in proto.metadata_props}
+    spec = GraphSpec.from_metadata(meta)
+    cfg = json.loads(meta.get(META_MODEL_CONFIG, "{}"))
+    arch = cfg.pop("arch", None)
+    if arch is None:
+        raise ValueError(f"{path}: no {META_MODEL_CONFIG} metadata with an arch")
+    cfg["origin"] = tuple(cfg.get("origin", (0.0, 0.0)))
+    net = build_model(arch, spec, **cfg)
+    inits = {i.name: onnx.numpy_helper.to_array(i) for i in proto.graph.initializer}
+    matmul_weight = {}  # module path -> the MatMul's weight (in, out)
+    for node in proto.graph.node:
+        if node.op_type == "MatMul":
+            w = [i for i in node.input if i in inits]
+            if len(w) == 1:
+                matmul_weight[node.name.replace("/", ".")] = inits[w[0]]
+    state = {}
+    for key, param in net.state_dict().items():
+        found = [v for n, v in inits.items() if n == f"net.{key}" or n.endswith(f".net.{key}")]
+        if not found and key.endswith(".weight"):
+            module = "." + key[: -len(".weight")] + "."
+            found = [w.T for n, w in matmul_weight.items() if module in n + "."]
+            found = found[:1] if all(np.array_equal(found[0], f) for f in found) else found
+        if len(found) != 1 or tuple(found[0].shape) != tuple(param.shape):
+            raise ValueError(f"{path}: cannot find parameter {key!r} {tuple(param.shape)} in the ONNX initializers")
+        state[key] = torch.from_numpy(np.array(found[0], dtype=np.float32))
+    net.load_state_dict(state)
+    net.eval()
+    _check_against(net, path, spec, check_batch)
+    return net
+
+
+def _check_against(net: PoseNet, path: Path, spec: GraphSpec, batch: GraphBatch | None) -> None:
+    if batch is None:
+        rng = np.random.default_rng(0)
+        mask = (rng.uniform(size=(16, spec.num_nodes)) > 0.3).astype(np.float32)
+        mask[:, 0] = 1.0
+        mask[:, 1 :: 18] = 1.0  # body nodes present
+        x = (rng.normal(size=(16, spec.num_nodes, spec.num_features)) * mask[:, :, None]).astype(np.float32)
+        from superbody.host.graph import masked_adjacency
+
+        batch = GraphBatch(x=x, adj=masked_adjacency(spec, mask), mask=mask)
+    opts = ort.SessionOptions()
+    opts.intra_op_num_threads = 1
+    sess = ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
+    feeds = batch.feeds()
+    ref = sess.run([OUTPUT_NAME], {i.name: feeds[i.name] for i in sess.get_inputs()})[0]
+    with torch.no_grad():
+        out = _ExportedPose(net)(*(torch.from_numpy(feeds[n]) for n in INPUT_NAMES))[0].numpy()
+    err = float(np.abs(out - ref).max())
+    if not err <= 1e-4:
+        raise ValueError(f"{path}: the network rebuilt from the file differs from it by {err:.2g} (> 1e-4)")
+
+
+def reexport(src: str | Path, dst: str | Path, fast: bool = True, opset: int = 17) -> Path:
+    """Export an exported fp32 model again (``export_onnx``, e.g. as the fast GAT), keeping
+    every metadata entry of the source (training config, calibrations) but the export's own."""
+    src, dst = Path(src), Path(dst)
+    meta = read_metadata(src)
+    net = load_onnx_model(src)
+    config = json.loads(meta.get(META_TRAIN_CONFIG, "{}"))
+    tmp = dst.with_name(dst.name + ".tmp")
+    export_onnx(net, net.spec, config, tmp, opset=opset, fast=fast)
+    proto = onnx.load(str(tmp))
+    fresh = {p.key: p.value for p in proto.metadata_props}
+    _set_metadata(proto, {**meta, **{k: fresh[k] for k in (META_EXPORT_FORMULATION, META_READS_ADJ)}})
+    onnx.save(proto, str(dst))
+    tmp.unlink()
+    return dst
+
+
+if __name__ == "__main__":
+    # python -m superbody.models.export models/wtf-apartment.fp32.onnx [...]: re-export shipped
+    # fp32 models in place (e.g. as the fast GAT), keeping their metadata.
+    import argparse
+    import sys
+
+    p = argparse.ArgumentParser(description="Export fp32 pose models again (as the fast GAT by default), in place, keeping their metadata.")
+    p.add_argument("models", nargs="+", type=Path, help="fp32 .onnx files written by export_onnx")
+    p.add_argument("--dense", action="store_true", help="the training graph instead of the fast GAT")
+    a = p.parse_args()
+    for m in a.models:
+        if not m.is_file():
+            print(f"superbody export: error: {m}: no such file", file=sys.stderr)
+            sys.exit(2)
+        reexport(m, m, fast=not a.dense)
+        print(f"{m}: {read_metadata(m)[META_EXPORT_FORMULATION]}")

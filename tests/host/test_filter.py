@@ -170,3 +170,38 @@ def test_measurement_std_weights_the_update():
     a = sure.update(S // 10, 1.0, 0.0, 0.0, meas_std=(0.01, 0.01, 0.01))
     b = unsure.update(S // 10, 1.0, 0.0, 0.0, meas_std=(1.0, 1.0, 1.0))
     assert a.x > 0.9 and b.x < a.x
+
+
+def test_update_many_equals_one_update_per_filter():
+    # Several people over time, with every path update_many must route right: the first
+    # measurement, the batched predict + update, a late one (ignored), a gap (reset), own sigmas
+    # and the default ones, yaw across pi.
+    from superbody.host.filter import update_many
+
+    rng = np.random.default_rng(3)
+    one, many = [PoseFilter() for _ in range(6)], [PoseFilter() for _ in range(6)]
+    t = np.zeros(6, dtype=np.int64)
+    for step in range(40):
+        t += rng.integers(S // 60, S // 10, size=6)
+        stamps = t.copy()
+        stamps[step % 6] -= S if step % 7 == 3 else 0  # now and then a measurement older than the state
+        stamps[(step + 2) % 6] += 3 * S if step == 20 else 0  # one gap past reset_after_s
+        pose = np.column_stack([rng.normal(0, 2, 6), rng.normal(0, 2, 6), rng.uniform(-math.pi, math.pi, 6)])
+        std = np.abs(rng.normal(0.2, 0.05, (6, 3)))
+        std[step % 3] = np.nan  # the default sigma for one person
+        expect = [f.update(int(s), *p, tuple(d) if np.isfinite(d).all() else None) for f, s, p, d in zip(one, stamps, pose, std)]
+        got = update_many(many, stamps, pose, std)
+        for e, g in zip(expect, got):
+            assert g.stamp_ns == e.stamp_ns
+            assert np.allclose([g.x, g.y, g.yaw, g.vx, g.vy, g.yaw_rate], [e.x, e.y, e.yaw, e.vx, e.vy, e.yaw_rate], atol=1e-9)
+            assert np.allclose(g.cov, e.cov, atol=1e-12)
+    assert [f.ignored for f in many] == [f.ignored for f in one] and sum(f.ignored for f in one) > 0
+
+
+def test_update_many_rejects_bad_input_like_update():
+    from superbody.host.filter import update_many
+
+    with pytest.raises(ValueError, match="x must be finite"):
+        update_many([PoseFilter()], [0], np.array([[math.nan, 0.0, 0.0]]))
+    with pytest.raises(ValueError, match="must match"):
+        update_many([PoseFilter()], [0, 1], np.zeros((1, 3)))

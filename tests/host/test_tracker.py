@@ -631,3 +631,50 @@ def test_reset_camera_admits_a_restarted_node_at_once():
     assert tr.admit(_obs(C1, T0 + S // 10, 0)) == "seq_backwards"
     tr.reset_camera("c1")
     assert tr.admit(_obs(C1, T0 + S // 10, 0)) is None
+
+
+def test_set_positions_equals_set_position_one_by_one():
+    # The host's batched feedback: the same Kalman states as one call per track, unknown ids and
+    # non-finite points refused per row.
+    from superbody.edge.simulator import SimCamera, World
+
+    world = World(SITE, 3, seed=2)
+    cams = [SimCamera(world, cam) for cam in SITE.camera_ids]
+    a, b = Tracker(SITE), Tracker(SITE)
+    for k in range(40):
+        for cam in cams:
+            obs = cam.observe(T0 + k * S // 10)[0]
+            a.update(obs)
+            b.update(obs)
+    ids = [tr.id for tr in a.tracks][:3]
+    assert len(ids) == 3
+    xy = np.array([[0.5, 0.5], [1.0, 2.0], [math.nan, 0.0]])[: len(ids)]
+    stamps = [T0 + 4 * S + j * S // 50 for j in range(len(ids))]
+    expect = [a.set_position(i, p, t) for i, p, t in zip(ids, xy, stamps)]
+    got = b.set_positions([*ids, 999], np.vstack([xy, [[0.0, 0.0]]]), [*stamps, T0])
+    assert list(got) == [*expect, False]
+    for i in ids:
+        assert np.allclose(a.track(i).position, b.track(i).position) and a.track(i).position_stamp_ns == b.track(i).position_stamp_ns
+
+
+def test_position_filter_written_out_equals_the_textbook_one():
+    # The tracker's per-element Kalman steps against host.filter's matrix ones, on random states.
+    from superbody.host.filter import predict, update, white_accel_noise
+    from superbody.host.tracker import _predict_positions, _update_positions
+
+    rng = np.random.default_rng(4)
+    B = 7
+    x = rng.normal(size=(B, 2, 2))
+    A = rng.normal(size=(B, 2, 2))
+    P = A @ A.transpose(0, 2, 1) + 0.1 * np.eye(2)  # (B, 2, 2) symmetric positive definite
+    dt = rng.uniform(0.0, 1.5, B)
+    F = np.zeros((B, 2, 2))
+    F[:, 0, 0] = F[:, 1, 1] = 1.0
+    F[:, 0, 1] = dt
+    xe, Pe = predict(x, P, F, white_accel_noise(dt, 2.0))
+    xg, Pg = _predict_positions(x, P, dt, 2.0)
+    assert np.allclose(xg, xe, atol=1e-12) and np.allclose(Pg, Pe, atol=1e-12)
+    z, R = rng.normal(size=(B, 2)), rng.uniform(0.01, 1.0, B)
+    xe, Pe = update(xe, Pe, z[:, None, :], np.array([[1.0, 0.0]]), R[:, None, None])
+    xg, Pg = _update_positions(xg, Pg, z, R)
+    assert np.allclose(xg, xe, atol=1e-12) and np.allclose(Pg, Pe, atol=1e-12)
