@@ -12,6 +12,13 @@ its metadata names (``pose.frame``):
   world axes ("rays" variant models, whose features are floor-centred too).
 
 yaw = atan2(sin, cos), wrapped to (-pi, pi] (REP-103: counter-clockwise from +x).
+
+Memory: onnxruntime's CPU arena grows to the largest batch it has run and never gives that
+back, so one call with 64 people (a peer flooding 64 copies of a person) would raise the host's
+resident memory for good (measured: +45 MB at 64 people against 10, 6 cameras, int8 model).
+``OnnxEstimator`` therefore runs at most ``max_batch`` people per onnxruntime call (the rest in
+further calls) and runs one call of ``max_batch`` all-zero graphs when it is built, so the arena
+has its largest size from the start and later input, hostile or not, cannot grow it.
 """
 
 from __future__ import annotations
@@ -47,6 +54,7 @@ __all__ = [
     "OUTPUT_NAME",
     "STD_OUTPUT_NAME",
     "META_STD_SCALE",
+    "MAX_BATCH",
 ]
 
 # The exported models' interface and metadata keys (written by models/export.py).
@@ -60,6 +68,8 @@ META_POSE_ORIGIN: Final[str] = "pose.origin"  # JSON [x, y]: origin of the raw o
 META_MODEL_CONFIG: Final[str] = "model.config"  # JSON: arch and hyper-parameters
 META_TRAIN_CONFIG: Final[str] = "train.config"  # JSON: the training run's config
 POSE_FRAMES: Final[tuple[str, ...]] = ("world", "floor_centre")
+# People per onnxruntime call: above a site's usual crowd (10), and bounds the arena (see above).
+MAX_BATCH: Final[int] = 16
 
 log = logging.getLogger("superbody.host")
 
@@ -122,8 +132,12 @@ class OnnxEstimator:
         providers: onnxruntime execution providers, in order of preference.
         intra_op_threads: threads onnxruntime may use inside one call.
         variant: if given, the graph variant the caller expects the model to have.
+        max_batch: people per onnxruntime call, in [1, 1024]; larger batches are split. The
+            arena is sized for it at construction (one warm-up call), so memory does not grow
+            with the number of people later.
 
     Raises:
+        ValueError: ``max_batch`` out of range.
         ModelMismatchError: the model lacks superbody metadata, or its cameras (and their
             order, "site" variant), view slots ("rays"), variant or input shapes do not fit.
     """
@@ -135,7 +149,11 @@ class OnnxEstimator:
         providers: Sequence[str] = ("CPUExecutionProvider",),
         intra_op_threads: int = 1,
         variant: Variant | None = None,
+        max_batch: int = MAX_BATCH,
     ):
+        if not (isinstance(max_batch, int) and 1 <= max_batch <= 1024):
+            raise ValueError(f"max_batch must be an integer in [1, 1024], got {max_batch!r}")
+        self.max_batch = max_batch
         opts = ort.SessionOptions()
         opts.intra_op_num_threads = intra_op_threads
         opts.inter_op_num_threads = 1
@@ -164,6 +182,13 @@ class OnnxEstimator:
         except (ValueError, TypeError):
             raise ModelMismatchError(f"{self.path}: metadata {META_STD_SCALE} must be 3 positive numbers or 3 rows of them "
                                      f"(cameras 1, 2, 3+), got {self.metadata.get(META_STD_SCALE)!r}") from None
+        self._warm_up()
+
+    def _warm_up(self) -> None:
+        """One call at ``max_batch`` (all-zero graphs, output unused): the arena's final size, now."""
+        shapes = {i.name: [self.max_batch, *i.shape[1:]] for i in self.session.get_inputs()}
+        names = [OUTPUT_NAME, STD_OUTPUT_NAME] if self.has_std else [OUTPUT_NAME]
+        self.session.run(names, {name: np.zeros(shape, np.float32) for name, shape in shapes.items()})
 
     def _check(self, site: Site, variant: Variant | None) -> None:
         spec, where = self.spec, str(self.path)
@@ -226,16 +251,19 @@ class OnnxEstimator:
         return Estimates(pose, std, ("onnx",) * len(pose))
 
     def estimate_with_std(self, view_sets: Sequence[Mapping[str, PersonView]]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Poses (B, 3) and their 1-sigma (B, 3) (x m, y m, yaw rad), in one onnxruntime call.
+        """Poses (B, 3) and their 1-sigma (B, 3) (x m, y m, yaw rad), ``max_batch`` people a call.
 
         The sigma is the network's own (``pose_std``) times the calibration in the metadata
         (``pose.std_scale``); NaN for a model without an uncertainty output.
         """
         if len(view_sets) == 0:
             return np.zeros((0, 3)), np.zeros((0, 3))
-        feeds = build_batch(view_sets, self.site, self.spec).feeds()
         names = [OUTPUT_NAME, STD_OUTPUT_NAME] if self.has_std else [OUTPUT_NAME]
-        outs = self.session.run(names, {name: feeds[name] for name in self._inputs})
+        chunks = []
+        for i in range(0, len(view_sets), self.max_batch):  # graphs built per chunk too: bounded buffers
+            feeds = build_batch(view_sets[i:i + self.max_batch], self.site, self.spec).feeds()
+            chunks.append(self.session.run(names, {name: feeds[name] for name in self._inputs}))
+        outs = [np.concatenate([c[k] for c in chunks]) for k in range(len(names))]
         pose = decode_output(outs[0], self.origin)
         if self.has_std:
             cams = np.clip([len(v) for v in view_sets], 1, 3) - 1
