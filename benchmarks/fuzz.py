@@ -13,6 +13,7 @@ anything else is a defect. Prints counts by outcome and reason; exit code 1 on a
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import random
 import sys
@@ -56,6 +57,11 @@ def _seeds(rng: random.Random) -> tuple[list[bytes], list[bytes]]:
     return obs, poses
 
 
+def _odd(rng: random.Random):
+    """A fresh copy of an odd value: a shared list or dict mutated later in the document could end up inside itself."""
+    return copy.deepcopy(rng.choice(_ODD_VALUES))
+
+
 def _walk(doc, rng: random.Random):
     """A random (container, key) inside a JSON document, or None for the root."""
     path = []
@@ -72,16 +78,16 @@ def _structural(payload: bytes, rng: random.Random) -> bytes:
     for _ in range(rng.randint(1, 3)):
         where = _walk(doc, rng)
         if where is None:
-            doc = rng.choice(_ODD_VALUES)
+            doc = _odd(rng)
             break
         parent, key = where
         op = rng.randrange(6)
         if op == 0:
-            parent[key] = rng.choice(_ODD_VALUES)
+            parent[key] = _odd(rng)
         elif op == 1 and isinstance(parent, dict):
             del parent[key]
         elif op == 2 and isinstance(parent, dict):
-            parent[rng.choice(["extra", "Schema", "people ", "\u00e9"])] = rng.choice(_ODD_VALUES)
+            parent[rng.choice(["extra", "Schema", "people ", "\u00e9"])] = _odd(rng)
         elif op == 3 and isinstance(parent[key], list):
             parent[key] = parent[key] * rng.randint(0, 70)
         elif op == 4 and isinstance(parent[key], (int, float)) and not isinstance(parent[key], bool):
