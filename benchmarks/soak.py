@@ -2,6 +2,7 @@
 
     python benchmarks/soak.py [--minutes 30] [--cameras 10] [--people 10] [--fps 15]
                               [--sample-every 60] [--warmup-minutes 5] [--json-out F]
+                              [--attack liveliness,oversize,garbage,future,flood | none]
     (make soak ARGS="..."; not part of the test suite)
 
 A Zenoh router, one simulated camera process per camera of a ring of cameras around an 8 x 6 m
@@ -16,6 +17,14 @@ per frame on two cameras' keys at 5 frames a second (more tracks than a PoseArra
 
 At the end: the RSS slope after the warm-up (MB/min, least squares), arrays per minute, and the
 host's rejection counters. The host must keep publishing throughout and its memory stay flat.
+``--attack`` keeps only some components of the hostile phase, to see what each one costs.
+
+What it found (each fixed in the product, with a test): Zenoh's shared-memory transport mapped
+every same-machine sender's 16 MiB pool into the host (edge/transport.py: now off), and
+onnxruntime's arena kept the size of the largest batch, 64 people in the flood
+(host/estimator.py: calls of at most 16 people, sized at start). No malloc setting is set:
+MALLOC_MMAP_THRESHOLD_=131072 did not change the shared-memory step, nor the flood's step with
+the arena on, and MALLOC_ARENA_MAX=2 had not helped either.
 """
 
 from __future__ import annotations
@@ -46,6 +55,8 @@ from superbody.host import pose as pose_msg  # noqa: E402
 from tests.conftest import free_port  # noqa: E402
 
 MODEL = ROOT / "models" / "site-independent.int8.onnx"
+# The hostile phase's components (--attack selects some, to find which one costs what).
+ATTACKS = ("liveliness", "oversize", "garbage", "future", "flood")
 
 
 def _rss_mb(pid: int) -> float:
@@ -65,8 +76,8 @@ def _spawn(args: list[str], log: Path) -> subprocess.Popen:
 class _Attacker:
     """The hostile phase, one burst a second from a thread until stopped."""
 
-    def __init__(self, session, site):
-        self.session, self.site, self.stop = session, site, threading.Event()
+    def __init__(self, session, site, components: frozenset[str] = frozenset(ATTACKS)):
+        self.session, self.site, self.stop, self.components = session, site, threading.Event(), components
         self.sent: Counter[str] = Counter()
         cam = site.cameras[0].id
         self.obs = json.loads(wire.encode(SimCamera(World(site, 2, seed=9), cam).observe(time.time_ns())[0]))
@@ -74,24 +85,25 @@ class _Attacker:
 
     def _run(self) -> None:
         s, site = self.session, self.site
-        tokens = [s.liveliness().declare_token(f"superbody/{site.name}/cameras/ev.il{i}/alive") for i in range(70)]
+        on = self.components
+        tokens = [s.liveliness().declare_token(f"superbody/{site.name}/cameras/ev.il{i}/alive") for i in range(70)] if "liveliness" in on else []
         self.sent["bad_liveliness_tokens"] = len(tokens)
         cams = [c.id for c in site.cameras[:2]]
         pubs = {c: s.declare_publisher(transport.observation_key(site.name, c)) for c in cams}
         k = 0
         while not self.stop.is_set():
             t = time.time_ns()
-            for _ in range(5):
+            for _ in range(5 if "oversize" in on else 0):
                 pubs[cams[0]].put(b"{" + b" " * 600_000)
                 self.sent["oversize"] += 1
-            for _ in range(20):
+            for _ in range(20 if "garbage" in on else 0):
                 pubs[cams[0]].put(os.urandom(200))
                 self.sent["garbage"] += 1
-            for _ in range(2):
+            for _ in range(2 if "future" in on else 0):
                 pubs[cams[0]].put(json.dumps({**self.obs, "people": [], "seq": 0, "stamp_ns": t + 900_000_000}))
                 self.sent["future_stamp"] += 1
             for _ in range(5):  # 5 flood frames a second on two cameras
-                for c in cams:
+                for c in cams if "flood" in on else ():
                     k += 1
                     doc = {**self.obs, "camera": c, "seq": 10**12 + k, "stamp_ns": time.time_ns(), "people": self.obs["people"][:1] * 64}
                     pubs[c].put(json.dumps(doc))
@@ -101,7 +113,8 @@ class _Attacker:
             tok.undeclare()
 
 
-def main(minutes: float, cameras: int, people: int, fps: float, sample_every: float, warmup_min: float, json_out: str | None) -> int:
+def main(minutes: float, cameras: int, people: int, fps: float, sample_every: float, warmup_min: float, json_out: str | None,
+         attack: frozenset[str] = frozenset(ATTACKS)) -> int:
     import zenoh
 
     site = ring_site(cameras)
@@ -117,7 +130,9 @@ def main(minutes: float, cameras: int, people: int, fps: float, sample_every: fl
                               "--connect", endpoint], tmp / f"camera-{c.id}.log")
     procs["host"] = _spawn(["host", "run", "--site", str(site_file), *estimator, "--connect", endpoint, "--status-every", "10"],
                            tmp / "host.log")
-    print(f"soak: {cameras} cameras x {people} people at {fps:g} fps, {minutes:g} min, estimator {estimator[-1]}; logs in {tmp}", flush=True)
+    print(f"soak: {cameras} cameras x {people} people at {fps:g} fps, {minutes:g} min, estimator {estimator[-1]}, "
+          f"attack {','.join(a for a in ATTACKS if a in attack) or 'none'}, MALLOC_MMAP_THRESHOLD_={os.environ.get('MALLOC_MMAP_THRESHOLD_', 'unset')}; "
+          f"logs in {tmp}", flush=True)
     lock = threading.Lock()
     window = {"arrays": 0, "people": []}
     last_status: dict = {}
@@ -148,7 +163,7 @@ def main(minutes: float, cameras: int, people: int, fps: float, sample_every: fl
                         raise RuntimeError(f"{name} exited with {p.returncode}; see {tmp}")
                 now = time.monotonic()
                 if attacker is None and hostile[0] <= now < hostile[1]:
-                    attacker = _Attacker(session, site)
+                    attacker = _Attacker(session, site, attack)
                     attacker.thread.start()
                     print("soak: hostile phase starts", flush=True)
                 if attacker is not None and now >= hostile[1] and not attacker.stop.is_set():
@@ -192,7 +207,7 @@ def main(minutes: float, cameras: int, people: int, fps: float, sample_every: fl
     post = [s for s in samples if s["t_min"] > hostile_end_min + sample_every / 60]
     apm = [s["arrays_per_min"] for s in samples]
     summary = {
-        "minutes": minutes, "cameras": cameras, "people": people, "fps": fps, "samples": samples,
+        "minutes": minutes, "cameras": cameras, "attack": [a for a in ATTACKS if a in attack], "people": people, "fps": fps, "samples": samples,
         "rss_slope_mb_per_min_after_warmup": slope, "warmup_minutes": warmup_min,
         "rss_slope_mb_per_min_before_attack": slope_of(before), "rss_slope_mb_per_min_after_attack": slope_of(post),
         "arrays_per_min": {"min": min(apm) if apm else 0, "max": max(apm) if apm else 0},
@@ -209,6 +224,13 @@ def main(minutes: float, cameras: int, people: int, fps: float, sample_every: fl
     return 0
 
 
+def _attacks(text: str) -> frozenset[str]:
+    names = frozenset(t.strip() for t in text.split(",") if t.strip()) - {"none"}
+    if names - set(ATTACKS):
+        raise argparse.ArgumentTypeError(f"unknown components {', '.join(sorted(names - set(ATTACKS)))}; allowed: {', '.join(ATTACKS)}, none")
+    return names
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--minutes", type=float, default=30.0)
@@ -218,5 +240,7 @@ if __name__ == "__main__":
     ap.add_argument("--sample-every", type=float, default=60.0, help="seconds between samples (default 60)")
     ap.add_argument("--warmup-minutes", type=float, default=5.0)
     ap.add_argument("--json-out")
+    ap.add_argument("--attack", type=_attacks, default=frozenset(ATTACKS),
+                    help=f"comma-separated hostile-phase components, any of {','.join(ATTACKS)}, or none (default: all)")
     a = ap.parse_args()
-    sys.exit(main(a.minutes, a.cameras, a.people, a.fps, a.sample_every, a.warmup_minutes, a.json_out))
+    sys.exit(main(a.minutes, a.cameras, a.people, a.fps, a.sample_every, a.warmup_minutes, a.json_out, a.attack))

@@ -7,7 +7,16 @@ start in any order; it listens on loopback only (``tcp/127.0.0.1:0``), never on 
 interface, and sets Zenoh's ``transport/link/rx/max_message_size`` to ``MAX_MESSAGE_BYTES``
 (the default is 1 GiB). Measured with eclipse-zenoh 1.10.2: a 5 MB put between two peers on
 loopback is still delivered with that limit set, so the host's own size check before copying
-(host.aggregator) is what bounds the memory a large payload costs. Endpoints given on the command line
+(host.aggregator) is what bounds the memory a large payload costs. It also turns Zenoh's shared
+memory transport off (``transport/shared_memory/enabled: false``; eclipse-zenoh 1.x enables it
+with a 16 MiB pool and a 3072-byte threshold): with it, every process on the machine that
+sends a message of 3 KB or more (a camera seeing 3 people, or any stranger) makes each
+receiver map that sender's 16 MiB pool, and the receiver's resident memory grows with the
+pool pages it touches: measured, +19 MB in a subscriber after two 4 KB puts from a peer, and
+the host's RSS rose for minutes in the soak (benchmarks/soak.py) as the cameras' pools were
+touched, then stepped when an attacker's pool was mapped. Our messages are at most a few tens
+of KB, so copying them costs nothing that matters, and no peer gets to put memory into the
+host. Endpoints given on the command line
 are checked (``check_endpoint``) so a typo is a one-line error, not a retry loop for ever.
 Secured deployments pass a config file (``--config``, see deploy/zenoh/): it is used as
 written, except for options given on the command line; ``--cfg KEY:VALUE`` (as in the Zenoh
@@ -198,6 +207,7 @@ def session_config(
         conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
     if not config_file:
         conf.insert_json5("transport/link/rx/max_message_size", str(MAX_MESSAGE_BYTES))
+        conf.insert_json5("transport/shared_memory/enabled", "false")  # see the module docstring
         conf.insert_json5("scouting/multicast/enabled", "false")
         conf.insert_json5("connect/timeout_ms", "-1")
         conf.insert_json5("connect/exit_on_failure", "false")

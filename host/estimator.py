@@ -12,6 +12,13 @@ its metadata names (``pose.frame``):
   world axes ("rays" variant models, whose features are floor-centred too).
 
 yaw = atan2(sin, cos), wrapped to (-pi, pi] (REP-103: counter-clockwise from +x).
+
+Memory: onnxruntime's CPU arena grows to the largest batch it has run and never gives that
+back, so one call with 64 people (a peer flooding 64 copies of a person) would raise the host's
+resident memory for good (measured: +45 MB at 64 people against 10, 6 cameras, int8 model).
+``OnnxEstimator`` therefore runs at most ``max_batch`` people per onnxruntime call (the rest in
+further calls) and, when it is built, runs ``max_batch`` people seen whole by every camera, so its
+buffers have their largest size from the start and later input, hostile or not, cannot grow them.
 """
 
 from __future__ import annotations
@@ -26,6 +33,7 @@ import numpy as np
 import onnxruntime as ort
 from numpy.typing import NDArray
 
+from superbody.edge.colour import HIST_BINS
 from superbody.edge.observation import PersonView
 from superbody.edge.site import Site
 from superbody.host.graph import GraphSpec, Variant, build_batch, floor_centre
@@ -48,6 +56,7 @@ __all__ = [
     "STD_OUTPUT_NAME",
     "META_STD_SCALE",
     "META_READS_ADJ",
+    "MAX_BATCH",
 ]
 
 # The exported models' interface and metadata keys (written by models/export.py).
@@ -62,6 +71,8 @@ META_MODEL_CONFIG: Final[str] = "model.config"  # JSON: arch and hyper-parameter
 META_TRAIN_CONFIG: Final[str] = "train.config"  # JSON: the training run's config
 META_READS_ADJ: Final[str] = "model.reads_adj"  # "false": the model takes its edges from mask (adj may be all zero); absent = "true"
 POSE_FRAMES: Final[tuple[str, ...]] = ("world", "floor_centre")
+# People per onnxruntime call: above a site's usual crowd (10), and bounds the arena (see above).
+MAX_BATCH: Final[int] = 16
 
 log = logging.getLogger("superbody.host")
 
@@ -124,8 +135,12 @@ class OnnxEstimator:
         providers: onnxruntime execution providers, in order of preference.
         intra_op_threads: threads onnxruntime may use inside one call.
         variant: if given, the graph variant the caller expects the model to have.
+        max_batch: people per onnxruntime call, in [1, 1024]; larger batches are split. The
+            arena is sized for it at construction (one warm-up call), so memory does not grow
+            with the number of people later.
 
     Raises:
+        ValueError: ``max_batch`` out of range.
         ModelMismatchError: the model lacks superbody metadata, or its cameras (and their
             order, "site" variant), view slots ("rays"), variant or input shapes do not fit.
     """
@@ -137,7 +152,11 @@ class OnnxEstimator:
         providers: Sequence[str] = ("CPUExecutionProvider",),
         intra_op_threads: int = 1,
         variant: Variant | None = None,
+        max_batch: int = MAX_BATCH,
     ):
+        if not (isinstance(max_batch, int) and 1 <= max_batch <= 1024):
+            raise ValueError(f"max_batch must be an integer in [1, 1024], got {max_batch!r}")
+        self.max_batch = max_batch
         opts = ort.SessionOptions()
         opts.intra_op_num_threads = intra_op_threads
         opts.inter_op_num_threads = 1
@@ -169,6 +188,26 @@ class OnnxEstimator:
         except (ValueError, TypeError):
             raise ModelMismatchError(f"{self.path}: metadata {META_STD_SCALE} must be 3 positive numbers or 3 rows of them "
                                      f"(cameras 1, 2, 3+), got {self.metadata.get(META_STD_SCALE)!r}") from None
+        self._warm_up()
+
+    def _warm_up(self) -> None:
+        """Calls at ``max_batch`` people seen whole by every camera (output unused): the buffers' final size, now.
+
+        The whole path (graph building and onnxruntime) with plausible input: all-zero graphs of
+        the same shape left the arena measurably smaller than real ones did.
+        """
+        kp = np.empty((17, 3), np.float32)
+        kp[:, 0] = np.linspace(0.3, 0.7, 17)
+        kp[:, 2] = 1.0
+        views = {}
+        for cam in self.site.cameras:
+            u = kp.copy()
+            u[:, 0] *= cam.width
+            u[:, 1] = np.linspace(0.2, 0.8, 17) * cam.height
+            views[cam.id] = PersonView(u, np.array([0.3 * cam.width, 0.2 * cam.height, 0.7 * cam.width, 0.8 * cam.height], np.float32),
+                                       np.full(HIST_BINS, 1.0 / np.prod(HIST_BINS), np.float32))
+        for _ in range(2):
+            self.estimate_with_std([views] * self.max_batch)
 
     def _check(self, site: Site, variant: Variant | None) -> None:
         spec, where = self.spec, str(self.path)
@@ -231,21 +270,25 @@ class OnnxEstimator:
         return Estimates(pose, std, ("onnx",) * len(pose))
 
     def estimate_with_std(self, view_sets: Sequence[Mapping[str, PersonView]]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Poses (B, 3) and their 1-sigma (B, 3) (x m, y m, yaw rad), in one onnxruntime call.
+        """Poses (B, 3) and their 1-sigma (B, 3) (x m, y m, yaw rad), ``max_batch`` people a call.
 
         The sigma is the network's own (``pose_std``) times the calibration in the metadata
         (``pose.std_scale``); NaN for a model without an uncertainty output.
         """
         if len(view_sets) == 0:
             return np.zeros((0, 3)), np.zeros((0, 3))
-        feeds = build_batch(view_sets, self.site, self.spec, adjacency=self.reads_adj).feeds()
-        if not self.reads_adj:
-            B = len(view_sets)
-            if len(self._zero_adj) < B:
-                self._zero_adj = np.zeros((max(B, 2 * len(self._zero_adj)), *self._zero_adj.shape[1:]), np.float32)
-            feeds["adj"] = self._zero_adj[:B]
         names = [OUTPUT_NAME, STD_OUTPUT_NAME] if self.has_std else [OUTPUT_NAME]
-        outs = self.session.run(names, {name: feeds[name] for name in self._inputs})
+        chunks = []
+        for i in range(0, len(view_sets), self.max_batch):  # graphs built per chunk too: bounded buffers
+            part = view_sets[i:i + self.max_batch]
+            feeds = build_batch(part, self.site, self.spec, adjacency=self.reads_adj).feeds()
+            if not self.reads_adj:
+                B = len(part)
+                if len(self._zero_adj) < B:
+                    self._zero_adj = np.zeros((self.max_batch, *self._zero_adj.shape[1:]), np.float32)  # once: B <= max_batch
+                feeds["adj"] = self._zero_adj[:B]
+            chunks.append(self.session.run(names, {name: feeds[name] for name in self._inputs}))
+        outs = [np.concatenate([c[k] for c in chunks]) for k in range(len(names))]
         pose = decode_output(outs[0], self.origin)
         if self.has_std:
             cams = np.clip([len(v) for v in view_sets], 1, 3) - 1

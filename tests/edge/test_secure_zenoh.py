@@ -44,11 +44,13 @@ def test_the_configs_load_and_are_what_the_readme_says(certs):
     assert json.loads(router.get_json("access_control/enabled")) is True
     assert json.loads(router.get_json("transport/link/tls/enable_mtls")) is True
     assert json.loads(router.get_json("listen/endpoints")) == [endpoint]
+    assert json.loads(router.get_json("transport/shared_memory/enabled")) is False  # see edge/transport.py
     for name in ("host", "app", *(f"camera-{c}" for c in SITE.camera_ids)):
         node = zenoh.Config.from_file(str(out / f"{name}.json5"))
         assert json.loads(node.get_json("mode")) == "client"
         assert json.loads(node.get_json("scouting/multicast/enabled")) is False
         assert json.loads(node.get_json("transport/auth/usrpwd/user")) == name
+        assert json.loads(node.get_json("transport/shared_memory/enabled")) is False
     for f in ("loopback/router.json5", "loopback/node.json5"):
         conf = zenoh.Config.from_file(str(ROOT / "deploy" / "zenoh" / f))
         assert all("127.0.0.1" in e for e in json.loads(conf.get_json("listen/endpoints")) + json.loads(conf.get_json("connect/endpoints")))

@@ -71,6 +71,19 @@ def test_default_peer_listens_on_loopback_only_and_caps_message_size():
     assert session_config("peer", listen=["tcp/127.0.0.1:7000"]).get_json("listen/endpoints") == '["tcp/127.0.0.1:7000"]'
 
 
+@pytest.mark.parametrize("mode", ["peer", "client", "router"])
+def test_shared_memory_is_off(mode):
+    # With it on (Zenoh's default), every same-machine sender's 16 MiB pool is mapped into the receiver
+    # (the soak's memory growth; tests/host/test_attacks.py reproduces it over loopback).
+    import json
+
+    from tests.conftest import ROOT
+
+    assert json.loads(session_config(mode).get_json("transport/shared_memory/enabled")) is False
+    for path in sorted((ROOT / "deploy" / "zenoh" / "loopback").glob("*.json5")):
+        assert json.loads(session_config(None, config_file=str(path)).get_json("transport/shared_memory/enabled")) is False, path
+
+
 # --- the Zenoh examples' conventions: --cfg KEY:VALUE, logging from the environment ----------
 
 

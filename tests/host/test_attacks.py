@@ -202,3 +202,46 @@ def test_oversize_payloads_cost_the_host_no_memory(processes):
         assert grown_mb < 50, f"host peak memory grew {grown_mb:.0f} MB"
         assert host.poll() is None
         sub.undeclare()
+
+
+def _shm_maps(pid: int) -> list[str]:
+    with open(f"/proc/{pid}/maps") as f:
+        return [line.split()[-1] for line in f if "/dev/shm/" in line]
+
+
+@pytest.mark.slow
+def test_a_peer_cannot_map_its_shared_memory_into_the_host(processes):
+    """The soak's memory step: Zenoh's shared memory transport (on by default, 16 MiB pool, for
+    messages of 3 KB or more) made the host map every same-machine sender's pool, an attacker's
+    included, and its RSS grew as the pool's pages were touched (+19 MB after two 4 KB puts)."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    conf = transport.session_config("peer", connect=[], listen=[endpoint])
+    conf.insert_json5("transport/shared_memory/enabled", "true")  # a stranger keeps Zenoh's default
+    with zenoh.open(conf) as evil:
+        status: list[dict] = []
+        cv = threading.Condition()
+
+        def on_status(sample) -> None:
+            with cv:
+                status.append(json.loads(sample.payload.to_bytes()))
+                cv.notify_all()
+
+        sub = evil.declare_subscriber(transport.host_status_key(SITE.name), on_status)
+        host = processes.start("host", "run", "--site", str(WTF_SITE), "--estimator", "analytic", "--status-every", "0.5",
+                               "--connect", endpoint)
+        with cv:
+            assert cv.wait_for(lambda: len(status) >= 2, timeout=30), "the host never reported"
+        # BLOCK: every put is delivered (a burst with Zenoh's default DROP may lose some without shared memory).
+        pub = evil.declare_publisher(transport.observation_key(SITE.name, "1"), congestion_control=zenoh.CongestionControl.BLOCK)
+        _wait_matched(pub)
+        before_kb = _vm_kb(host.pid, "VmRSS")
+        for k in range(200):  # bounded: 200 payloads of 4-64 KB, each over Zenoh's 3 KB shared-memory threshold
+            pub.put(b"{" + b" " * (4096 + 300 * k))
+        with cv:
+            assert cv.wait_for(lambda: sum(status[-1]["rejected"].values()) >= 200, timeout=30), status[-1]["rejected"]
+        grown_mb = (_vm_kb(host.pid, "VmRSS") - before_kb) / 1024
+        print(f"host RSS grew {grown_mb:.1f} MB; shared memory mapped: {_shm_maps(host.pid)}")
+        assert grown_mb < 10, f"host RSS grew {grown_mb:.1f} MB"
+        assert _shm_maps(host.pid) == [], "the host mapped a peer's shared memory"
+        assert host.poll() is None
+        sub.undeclare()
