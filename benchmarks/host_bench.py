@@ -116,7 +116,7 @@ def processing(site: Site, estimator, name: str, data: list, speed: float) -> di
 def sustained(site: Site, estimator, name: str, data: list, offered: float) -> float:
     """The highest observation rate (obs/s) at which the backlog stays bounded (p99 < 100 ms)."""
     best = 0.0
-    for speed in (1, 1.5, 2, 3, 4, 6, 8, 12, 16, 24, 32):
+    for speed in (1, 1.5, 2, 2.5, 3, 4, 5, 6, 8, 10, 12, 16, 20, 24, 32):
         r = processing(site, estimator, name, data, speed)
         if r["p99_ms"] > 100 or r["backlog_s"] > 0.1:
             break
