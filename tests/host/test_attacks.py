@@ -167,6 +167,29 @@ def _vm_kb(pid: int, field: str) -> int:
     raise AssertionError(f"no {field} for {pid}")
 
 
+def _analytic_host_reporting(session, processes, endpoint: str):
+    """A host process (analytic estimator, status every 0.5 s) connected to ``endpoint``, and a
+    subscriber on its status; returns once it has reported twice.
+
+    Returns:
+        ``(host process, status messages so far, their condition variable, the subscriber)``.
+    """
+    status: list[dict] = []
+    cv = threading.Condition()
+
+    def on_status(sample) -> None:
+        with cv:
+            status.append(json.loads(sample.payload.to_bytes()))
+            cv.notify_all()
+
+    sub = session.declare_subscriber(transport.host_status_key(SITE.name), on_status)
+    host = processes.start("host", "run", "--site", str(WTF_SITE), "--estimator", "analytic", "--status-every", "0.5",
+                           "--connect", endpoint)
+    with cv:
+        assert cv.wait_for(lambda: len(status) >= 2, timeout=30), "the host never reported"
+    return host, status, cv, sub
+
+
 @pytest.mark.slow
 def test_oversize_payloads_cost_the_host_no_memory(processes):
     """#6: 100 x 5 MB payloads grew the host from ~200 MB to 445 MB, never returned."""
@@ -174,19 +197,7 @@ def test_oversize_payloads_cost_the_host_no_memory(processes):
     endpoint = f"tcp/127.0.0.1:{port}"
     conf = transport.session_config("peer", connect=[], listen=[endpoint])
     with zenoh.open(conf) as session:
-        status: list[dict] = []
-        cv = threading.Condition()
-
-        def on_status(sample) -> None:
-            with cv:
-                status.append(json.loads(sample.payload.to_bytes()))
-                cv.notify_all()
-
-        sub = session.declare_subscriber(transport.host_status_key(SITE.name), on_status)
-        host = processes.start("host", "run", "--site", str(WTF_SITE), "--estimator", "analytic", "--status-every", "0.5",
-                               "--connect", endpoint)
-        with cv:
-            assert cv.wait_for(lambda: len(status) >= 2, timeout=30)
+        host, status, cv, sub = _analytic_host_reporting(session, processes, endpoint)
         before = _vm_kb(host.pid, "VmHWM")
         key = transport.observation_key(SITE.name, "1")
         big, mid = b"{" + b" " * (5 * 1024 * 1024), b"{" + b" " * (600 * 1024)
@@ -218,19 +229,7 @@ def test_a_peer_cannot_map_its_shared_memory_into_the_host(processes):
     conf = transport.session_config("peer", connect=[], listen=[endpoint])
     conf.insert_json5("transport/shared_memory/enabled", "true")  # a stranger keeps Zenoh's default
     with zenoh.open(conf) as evil:
-        status: list[dict] = []
-        cv = threading.Condition()
-
-        def on_status(sample) -> None:
-            with cv:
-                status.append(json.loads(sample.payload.to_bytes()))
-                cv.notify_all()
-
-        sub = evil.declare_subscriber(transport.host_status_key(SITE.name), on_status)
-        host = processes.start("host", "run", "--site", str(WTF_SITE), "--estimator", "analytic", "--status-every", "0.5",
-                               "--connect", endpoint)
-        with cv:
-            assert cv.wait_for(lambda: len(status) >= 2, timeout=30), "the host never reported"
+        host, status, cv, sub = _analytic_host_reporting(evil, processes, endpoint)
         # BLOCK: every put is delivered (a burst with Zenoh's default DROP may lose some without shared memory).
         pub = evil.declare_publisher(transport.observation_key(SITE.name, "1"), congestion_control=zenoh.CongestionControl.BLOCK)
         _wait_matched(pub)
