@@ -33,7 +33,6 @@ import argparse
 import dataclasses
 import json
 import os
-import signal
 import subprocess
 import sys
 import tempfile
@@ -52,6 +51,7 @@ from superbody.edge import transport, wire  # noqa: E402
 from superbody.edge.simulator import SimCamera, World  # noqa: E402
 from superbody.edge.site import dump_site  # noqa: E402
 from superbody.host import pose as pose_msg  # noqa: E402
+from superbody.host.demo import stop_processes  # noqa: E402
 from tests.conftest import free_port  # noqa: E402
 
 MODEL = ROOT / "models" / "site-independent.int8.onnx"
@@ -187,14 +187,7 @@ def main(minutes: float, cameras: int, people: int, fps: float, sample_every: fl
     finally:
         if attacker is not None:
             attacker.stop.set()
-        for p in procs.values():
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-        for p in procs.values():
-            try:
-                p.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                p.kill()
+        stop_processes(procs.values(), timeout_s=15)
     def slope_of(window: list[dict]) -> float:
         return float(np.polyfit([s["t_min"] for s in window], [s["rss_mb"] for s in window], 1)[0]) if len(window) >= 2 else float("nan")
 

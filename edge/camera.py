@@ -20,6 +20,7 @@ __all__ = [
     "Camera",
     "look_at_rotation",
     "world_to_camera",
+    "normalised_to_rays",
     "project",
     "distort",
     "undistort",
@@ -189,10 +190,24 @@ def pixel_to_ray(uv: NDArray, cam: Camera) -> tuple[NDArray[np.float64], NDArray
         ``(origin, directions)``: the optical centre, shape (3,), and unit ray directions in
         the world frame, shape (N, 3).
     """
-    xn = undistort(uv, cam)  # (N, 2)
-    d_cam = np.hstack([xn, np.ones((len(xn), 1))])  # (N, 3)
-    d = d_cam @ cam.R.T  # (N, 3) rotated into the world
-    return cam.t.copy(), d / np.linalg.norm(d, axis=1, keepdims=True)
+    return cam.t.copy(), normalised_to_rays(undistort(uv, cam), cam.R)
+
+
+def normalised_to_rays(xn: NDArray, R: NDArray) -> NDArray[np.float64]:
+    """Undistorted normalised image coordinates to unit world ray directions.
+
+    Args:
+        xn: (..., 2) normalised coordinates (``undistort``).
+        R: (..., 3, 3) camera-to-world rotations, broadcast against ``xn``'s leading axes
+            (one camera, or one per point).
+
+    Returns:
+        (..., 3) unit directions: R [x, y, 1], normalised.
+    """
+    xn = np.asarray(xn, dtype=np.float64)
+    d_cam = np.concatenate([xn, np.ones((*xn.shape[:-1], 1))], axis=-1)  # (..., 3)
+    d = np.matmul(np.asarray(R, dtype=np.float64), d_cam[..., None])[..., 0]  # (..., 3) rotated into the world
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
 def intersect_plane(origin: NDArray, directions: NDArray, height: float | NDArray = 0.0) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:

@@ -24,6 +24,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -39,7 +40,7 @@ from superbody.edge.simulator import SimCamera, World
 from superbody.edge.site import SiteError, load_site
 from superbody.host import pose as pose_msg
 
-__all__ = ["DemoConfig", "run_demo", "register"]
+__all__ = ["DemoConfig", "run_demo", "register", "stop_processes"]
 
 log = logging.getLogger("superbody.demo")
 
@@ -292,14 +293,22 @@ def run_demo(cfg: DemoConfig, stop: threading.Event | None = None) -> dict:
             summary["host_reported_camera_gone"] = f"camera {cfg.kill_camera} is gone" in host_log
         return summary
     finally:
-        for p in procs.values():
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-        for p in procs.values():
-            try:
-                p.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                p.kill()
+        stop_processes(procs.values())
+
+
+def stop_processes(procs: Iterable[subprocess.Popen], timeout_s: float = 10.0) -> None:
+    """Stop child processes as systemd would: SIGTERM to all, then SIGKILL to any still running
+    after ``timeout_s``."""
+    procs = list(procs)
+    for p in procs:
+        if p.poll() is None:
+            p.send_signal(signal.SIGTERM)
+    for p in procs:
+        try:
+            p.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
 
 
 def _print_summary(s: dict) -> None:

@@ -218,13 +218,7 @@ class PoseFilter:
             return self._start(t_ns, x, y, yaw, R)
         if not self.config.enabled:
             return self._pass_through(t_ns, x, y, yaw, R)
-        xs, P = self._predicted(t_ns)
-        # Unwrap the yaw measurement next to the predicted yaw: the innovation stays in (-pi, pi].
-        z = np.array([x, y, xs[2] + wrap_angle(yaw - xs[2])])
-        xs, P = update(xs, P, z, _H, R)
-        xs[2] = wrap_angle(xs[2])
-        self._t, self._x, self._P = t_ns, xs, P
-        return self._pose(t_ns, xs, P)
+        return _step([self], np.array([t_ns]), np.array([[x, y, yaw]]), np.array([std]))[0]
 
     def predict_to(self, t_ns: int) -> FilteredPose:
         """The pose predicted at ``t_ns`` (the state's own time if ``t_ns`` is earlier).
@@ -243,16 +237,8 @@ class PoseFilter:
         return self._pose(t_ns, xs, P)
 
     def _predicted(self, t_ns: int) -> tuple[NDArray, NDArray]:
-        dt = (t_ns - self._t) * _NS
-        F = np.eye(6)
-        F[:3, 3:] = dt * np.eye(3)
-        c = self.config
-        Q = np.zeros((6, 6))
-        for i, sigma in ((0, c.accel_std_mps2), (1, c.accel_std_mps2), (2, c.yaw_accel_std_radps2)):
-            Q[np.ix_((i, i + 3), (i, i + 3))] = white_accel_noise(dt, sigma)
-        xs, P = predict(self._x, self._P, F, Q)
-        xs[2] = wrap_angle(xs[2])
-        return xs, P
+        x, P = _predict_many([self], np.array([t_ns]))
+        return x[0, :, 0], P[0]
 
     def _start(self, t_ns: int, x: float, y: float, yaw: float, R: NDArray) -> FilteredPose:
         c = self.config
@@ -327,31 +313,43 @@ def update_many(
             out[i] = f.update(t, float(pose[i, 0]), float(pose[i, 1]), float(pose[i, 2]), stds[i])
     if batch:
         fs = [filters[i] for i in batch]
-        n = len(fs)
-        t = np.array([int(t_ns[i]) for i in batch], dtype=np.int64)
-        dt = (t - np.array([f._t for f in fs], dtype=np.int64)) * _NS  # (n,)
-        sig = np.array([(f.config.accel_std_mps2, f.config.accel_std_mps2, f.config.yaw_accel_std_radps2) for f in fs])  # (n, 3)
         std = np.array([stds[i] or (filters[i].config.meas_std_xy_m, filters[i].config.meas_std_xy_m, filters[i].config.meas_std_yaw_rad)
                         for i in batch])  # (n, 3)
-        x = np.stack([f._x for f in fs])[:, :, None]  # (n, 6, 1)
-        P = np.stack([f._P for f in fs])  # (n, 6, 6)
-        F = np.broadcast_to(np.eye(6), (n, 6, 6)).copy()
-        F[:, [0, 1, 2], [3, 4, 5]] = dt[:, None]  # (n, 6, 6): position i += dt * its rate
-        # Q per axis i: sigma_i^2 [[dt^4/4, dt^3/2], [dt^3/2, dt^2]] on (i, i + 3)
-        q = white_accel_noise(dt, 1.0)  # (n, 2, 2)
-        Q = np.zeros((n, 6, 6))
-        for i in range(3):
-            Q[:, i :: 3, i :: 3] = (sig[:, i] ** 2)[:, None, None] * q
-        x, P = predict(x, P, F, Q)
-        x[:, 2, 0] = wrap_angle(x[:, 2, 0])
-        yaw = wrap_angle(pose[batch, 2])  # (n,)
-        # Unwrap each yaw measurement next to its predicted yaw: the innovation stays in (-pi, pi].
-        z = np.stack([pose[batch, 0], pose[batch, 1], x[:, 2, 0] + wrap_angle(yaw - x[:, 2, 0])], axis=1)[:, :, None]  # (n, 3, 1)
-        R = np.zeros((n, 3, 3))
-        R[:, [0, 1, 2], [0, 1, 2]] = np.square(std)
-        x, P = update(x, P, z, _H, R)
-        x[:, 2, 0] = wrap_angle(x[:, 2, 0])
-        for k, (i, f) in enumerate(zip(batch, fs)):
-            f._t, f._x, f._P = int(t[k]), x[k, :, 0], P[k]
-            out[i] = f._pose(f._t, f._x, f._P)
+        for i, fp in zip(batch, _step(fs, np.array([int(t_ns[i]) for i in batch], dtype=np.int64), pose[batch], std)):
+            out[i] = fp
     return out  # type: ignore[return-value]
+
+
+def _predict_many(filters: Sequence[PoseFilter], t_ns: NDArray) -> tuple[NDArray, NDArray]:
+    """Each filter's state predicted to its time in ``t_ns`` (n,): x (n, 6, 1), P (n, 6, 6)."""
+    n = len(filters)
+    dt = (np.asarray(t_ns, dtype=np.int64) - np.array([f._t for f in filters], dtype=np.int64)) * _NS  # (n,)
+    sig = np.array([(f.config.accel_std_mps2, f.config.accel_std_mps2, f.config.yaw_accel_std_radps2) for f in filters])  # (n, 3)
+    F = np.broadcast_to(np.eye(6), (n, 6, 6)).copy()
+    F[:, [0, 1, 2], [3, 4, 5]] = dt[:, None]  # (n, 6, 6): position i += dt * its rate
+    # Q per axis i: sigma_i^2 [[dt^4/4, dt^3/2], [dt^3/2, dt^2]] on (i, i + 3)
+    q = white_accel_noise(dt, 1.0)  # (n, 2, 2)
+    Q = np.zeros((n, 6, 6))
+    for i in range(3):
+        Q[:, i :: 3, i :: 3] = (sig[:, i] ** 2)[:, None, None] * q
+    x, P = predict(np.stack([f._x for f in filters])[:, :, None], np.stack([f._P for f in filters]), F, Q)
+    x[:, 2, 0] = wrap_angle(x[:, 2, 0])
+    return x, P
+
+
+def _step(filters: Sequence[PoseFilter], t_ns: NDArray, pose: NDArray, std: NDArray) -> list[FilteredPose]:
+    """The plain predict + update of n filters with a state not newer than ``t_ns`` (n,), in one
+    batch: measurements ``pose`` (n, 3) of 1-sigma ``std`` (n, 3). Sets and returns their states."""
+    x, P = _predict_many(filters, t_ns)
+    yaw = wrap_angle(pose[:, 2])  # (n,)
+    # Unwrap each yaw measurement next to its predicted yaw: the innovation stays in (-pi, pi].
+    z = np.stack([pose[:, 0], pose[:, 1], x[:, 2, 0] + wrap_angle(yaw - x[:, 2, 0])], axis=1)[:, :, None]  # (n, 3, 1)
+    R = np.zeros((len(filters), 3, 3))
+    R[:, [0, 1, 2], [0, 1, 2]] = np.square(std)
+    x, P = update(x, P, z, _H, R)
+    x[:, 2, 0] = wrap_angle(x[:, 2, 0])
+    out = []
+    for k, f in enumerate(filters):
+        f._t, f._x, f._P = int(t_ns[k]), x[k, :, 0], P[k]
+        out.append(f._pose(f._t, f._x, f._P))
+    return out

@@ -52,7 +52,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from superbody.edge.body import KEYPOINTS, MIRROR, NUM_KEYPOINTS, PARENT, TYPICAL_HEIGHT_M
-from superbody.edge.camera import undistort
+from superbody.edge.camera import normalised_to_rays, undistort
 from superbody.edge.observation import PersonView
 from superbody.edge.site import Site
 
@@ -486,8 +486,8 @@ def build_batch(view_sets: Sequence[Mapping[str, PersonView]], site: Site, spec:
         p3 = np.stack(pts).astype(np.float64) if V else np.zeros((0, J, 3))  # (V, 17, 3) camera frame
     if spec.variant == "rays" or spec.geometry:
         origin = np.array([*floor_centre(site), 0.0])  # (3,)
-        # Every present node's ray, all views at once: d = R [(u - cx)/fx, (v - cy)/fy, 1], unit
-        # (edge.camera.pixel_to_ray); cameras with lens distortion undistort their pixels first.
+        # Every present node's ray, all views at once (edge.camera.pixel_to_ray per camera, in one
+        # pass): normalised coordinates; cameras with lens distortion undistort their pixels.
         f_c, R_c, t_c, distorted = _site_rays(site)
         k = f_c[c_idx]  # (V, 4)
         xn = (uv - k[:, None, 2:]) / k[:, None, :2]  # (V, 18, 2) normalised image coordinates
@@ -497,8 +497,7 @@ def build_batch(view_sets: Sequence[Mapping[str, PersonView]], site: Site, spec:
             x_c = xn[sel]
             x_c[sub] = undistort(uv[sel][sub], site.cameras[c])
             xn[sel] = x_c
-        d = np.einsum("vij,vnj->vni", R_c[c_idx], np.concatenate([xn, np.ones((V, SLOT_SIZE, 1))], axis=2))  # (V, 18, 3) world frame
-        rays = np.where(present[:, :, None], d / np.linalg.norm(d, axis=2, keepdims=True), 0.0)  # (V, 18, 3)
+        rays = np.where(present[:, :, None], normalised_to_rays(xn, R_c[c_idx][:, None]), 0.0)  # (V, 18, 3) world frame
         centres = t_c[c_idx] - origin  # (V, 3)
         if spec.use_3d and spec.variant == "rays":
             p3 = np.einsum("vij,vnj->vni", R_c[c_idx], p3) + centres[:, None]  # world frame, floor-centred

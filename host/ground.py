@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from superbody.edge.body import INDEX, LEFT_HIP, LEFT_SHOULDER, RIGHT_HIP, RIGHT_SHOULDER, TYPICAL_HEIGHT_M
-from superbody.edge.camera import Camera, pixel_to_ray
+from superbody.edge.camera import Camera, intersect_plane, pixel_to_ray
 from superbody.edge.observation import PersonView
 
 __all__ = ["MAX_RANGE_M", "LEVELS", "Level", "ground_point", "ground_points"]
@@ -113,16 +113,15 @@ def ground_points(
         uv[:, n_levels - 1, 1] = np.where(box_ok, bb[:, 3], np.nan)  # bottom centre
         uv[:, n_levels, 1] = np.where(box_ok, bb[:, 1], np.nan)  # top centre
 
-        # One batch of rays; where each level's ray meets its plane z = h: t + s d, s > 0.
+        # One batch of rays; where each level's ray meets its plane z = h.
         flat = uv.reshape(-1, 2)  # (N (L + 1), 2)
         usable = ~np.isnan(flat).any(axis=1)
         d = np.full((len(flat), 3), np.nan)
         if usable.any():
             d[usable] = pixel_to_ray(flat[usable], cam)[1]
         d = d.reshape(n, n_levels + 1, 3)  # (N, L + 1, 3)
-        s = (_HEIGHT - t[2]) / d[:, :n_levels, 2]  # (N, L)
-        valid = np.isfinite(s) & (s > 0)
-        points = t[:2] + s[..., None] * d[:, :n_levels, :2]  # (N, L, 2)
+        hit, valid = intersect_plane(t, d[:, :n_levels].reshape(-1, 3), np.tile(_HEIGHT, n))
+        points, valid = hit[:, :2].reshape(n, n_levels, 2), valid.reshape(n, n_levels)  # (N, L, 2), (N, L)
         r = np.hypot(points[..., 0] - t[0], points[..., 1] - t[1])  # (N, L) horizontal range
         valid &= (r <= max_range_m) & (dh >= _MIN_DH_M)
         # A box is a person's only if it spans a plausible body: the top edge's ray, at the

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import socket
 import subprocess
 import threading
@@ -12,6 +11,8 @@ import sys
 from pathlib import Path
 
 import pytest
+
+from superbody.host.demo import stop_processes
 
 ROOT = Path(__file__).resolve().parents[1]
 DEV_JSON = ROOT.parent / "shared" / "datasets" / "wheresthefellow" / "dev.json"
@@ -39,15 +40,7 @@ class Processes:
         return p
 
     def stop_all(self) -> None:
-        for p in self.procs:
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-        for p in self.procs:
-            try:
-                p.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
+        stop_processes(self.procs)
 
 
 @pytest.fixture
