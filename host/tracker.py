@@ -13,9 +13,11 @@ and a person unseen for 2 s is removed. This one adds:
   (``scipy.optimize.linear_sum_assignment``) on colour plus normalised geometric distance,
   infeasible pairs forbidden, so one greedy choice cannot steal another view's only match;
 - care in starting people: a view starts a candidate only if it shows enough joints
-  (``min_joints_new``) and does not stand inside the gate of a track that this frame did not
-  see; such views are that person under another camera's light, and starting a candidate from
-  them breeds duplicates that later split a person's views between two ids;
+  (``min_joints_new``), is placed on the floor (a ground point surer than ``gate_m``, 1 sigma)
+  and does not stand inside the gate of a track that this frame did not see. Views that fail
+  are usually a known person under another camera's light, or a partial view whose box puts
+  them metres away; starting a candidate from them breeds duplicates that later split a
+  person's views between two ids. (The ground rule applies only with ``use_geometry``.)
 - time from the messages: everything runs on capture stamps and an injected ``now_ns``. A
   camera's frames are admitted in order (``Tracker.admit``): a frame older than the newest one
   admitted from that camera is "late", one with the same stamp or sequence number a
@@ -108,7 +110,8 @@ class TrackerConfig:
             ``gate_m + sigma`` of the track's predicted position.
         use_geometry: False turns the gate and the geometric cost off (the paper's tracker).
         min_joints: views with fewer visible joints are ignored.
-        min_joints_new: a view needs at least this many visible joints to start a candidate;
+        min_joints_new: a view needs at least this many visible joints to start a candidate
+            (and, with ``use_geometry``, a ground point whose 1-sigma is under ``gate_m``);
             poorer ones (a head and a hand at the image's edge) may only match existing
             tracks: their colours come from a few pixels and their ground points from a box,
             and a candidate started from them is usually a duplicate of someone.
@@ -357,8 +360,9 @@ class Match:
         track_id: the track it went to, or None when it was ignored.
         status: "matched" to an existing track, "created" a new candidate, or "ignored":
             fewer than ``min_joints`` joints; or unmatched and unfit to start a candidate
-            (fewer than ``min_joints_new`` joints, standing where an unseen track stands, or
-            with neither a colour nor a ground point); ``Tracker.stats`` counts each reason.
+            (fewer than ``min_joints_new`` joints, no ground point surer than ``gate_m``,
+            standing where an unseen track stands, or with neither a colour nor a ground
+            point); ``Tracker.stats`` counts each reason.
         colour_distance: median Bhattacharyya distance to the track's history (NaN if unknown
             or new).
         ground_distance_m: distance from its ground point to the track's predicted position
@@ -444,7 +448,7 @@ DROP_REASONS: Final[tuple[str, ...]] = ("wrong_site", "unknown_camera", "stale",
 _STATS = (
     "observations", "views", "late_dropped", "duplicate_dropped", "stale_dropped", "seq_backwards_dropped", "wrong_site",
     "unknown_camera", "too_few_joints", "track_cap", "evicted_candidates", "too_few_joints_new", "no_ground_point", "no_signature",
-    "suppressed", "matched", "new_candidates", "confirmed", "removed", "dropped_candidates", "reidentified",
+    "unplaced_new", "suppressed", "matched", "new_candidates", "confirmed", "removed", "dropped_candidates", "reidentified",
 )
 
 
@@ -589,7 +593,10 @@ class Tracker:
             if n_joints[i] < cfg.min_joints_new:
                 st["too_few_joints_new"] += 1
                 continue
-            if sigma[r] < cfg.gate_m and (near[r] & lonely).any():
+            if cfg.use_geometry and not sigma[r] < cfg.gate_m:  # no ground point, or one less sure than the gate
+                st["unplaced_new"] += 1
+                continue
+            if (near[r] & lonely).any():
                 st["suppressed"] += 1
                 continue
             if len(self._tracks) >= cfg.max_tracks and not self._evict_candidate(t):

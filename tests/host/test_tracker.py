@@ -224,6 +224,33 @@ def test_a_view_where_an_unseen_track_stands_does_not_start_a_duplicate(with_a, 
     assert tr.stats["suppressed"] == (not with_a)
 
 
+def _unplaced(view: PersonView) -> PersonView:
+    """The view without its ankles, hips, shoulders and knees, its box around what is left: no
+    level gives a ground point (a box around a head and arms spans no person's height)."""
+    kp = view.keypoints.copy()
+    kp[5:7] = kp[11:] = np.nan
+    uv = kp[~np.isnan(kp[:, 0]), :2]
+    return PersonView(kp, np.array([*uv.min(axis=0), *uv.max(axis=0)], dtype=np.float32), view.histogram)
+
+
+@pytest.mark.parametrize("use_geometry", [True, False])
+def test_a_view_that_cannot_be_placed_on_the_floor_starts_nobody(use_geometry):
+    # The demo's flake (3 people, seed 7): a camera saw a known person in its own light, with a
+    # box that put them metres away (1-sigma 1.2 m); the view started a candidate, later
+    # views of that camera kept it alive on colour alone, and it was confirmed: a duplicate
+    # whose poses alternated with the real track's.
+    tr = Tracker(SITE, TrackerConfig(use_geometry=use_geometry))
+    for k in range(5):
+        tr.update(one_person(T0 + k * S // 10, seed=k))
+    v = _unplaced(person_view(C2, 0.0, 0.0, 0.0, colour(110.0)))
+    assert v.num_visible >= TrackerConfig().min_joints_new
+    (m,) = tr.update(Observation(SITE.name, "c2", 0, T0 + S // 2, 640, 480, (v,)))
+    assert tr.stats["no_ground_point"] == 1
+    # With geometry a newcomer must be placed; the paper's tracker has no floor to place them on.
+    assert m.status == ("ignored" if use_geometry else "created")
+    assert tr.stats["unplaced_new"] == use_geometry
+
+
 def test_view_without_colour_or_ground_is_ignored():
     kp = np.full((NUM_KEYPOINTS, 3), np.nan, dtype=np.float32)
     kp[:5] = (320.0, 0.0, 0.9)  # a head at the top row: its floor point is far beyond range
