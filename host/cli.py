@@ -81,6 +81,7 @@ def _run_host(args: argparse.Namespace) -> int:
     from superbody.host.aggregator import Aggregator, HostConfig, run_host
     from superbody.host.estimator import ModelMismatchError
     from superbody.host.filter import FilterConfig
+    from superbody.host.memory import pin_mmap_threshold
     from superbody.host.tracker import TrackerConfig
 
     try:
@@ -101,6 +102,7 @@ def _run_host(args: argparse.Namespace) -> int:
     except (SiteError, ValueError, ModelMismatchError, OSError) as e:
         print(f"superbody host run: error: {e}", file=sys.stderr)
         return 2
+    pin_mmap_threshold()  # a burst of large messages must not raise the host's memory for good
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
