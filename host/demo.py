@@ -149,10 +149,12 @@ class _Watcher:
             if not arr.people:
                 s.rows = []
                 return
-            # Match each pose to the true person nearest at the pose's capture time.
-            truth = np.array([[st.x, st.y] for st in self.world.states(arr.people[0].stamp_ns * 1e-9)])
+            # Match each pose to the true person nearest at that pose's own capture time (people
+            # of one array were seen at different instants, up to the host's freshness apart).
+            states = [self.world.states(p.stamp_ns * 1e-9) for p in arr.people]
+            truth = np.array([[[st.x, st.y] for st in sts] for sts in states])  # (poses, people, 2)
             poses = np.array([[p.x, p.y] for p in arr.people])
-            cost = np.linalg.norm(poses[:, None] - truth[None], axis=2)
+            cost = np.linalg.norm(truth - poses[:, None], axis=2)
             rows, cols = linear_sum_assignment(cost)
             assigned = {r: c for r, c in zip(rows, cols) if cost[r, c] < _MATCH_GATE_M}
             s.rows = []
@@ -162,7 +164,7 @@ class _Watcher:
                 if k is None:
                     s.rows.append((p, None, math.nan, math.nan))
                     continue
-                st = self.world.states(p.stamp_ns * 1e-9)[k]
+                st = states[i][k]
                 e_pos = math.hypot(p.x - st.x, p.y - st.y)
                 e_yaw = abs(float(wrap_angle(p.yaw - st.yaw)))
                 s.pos_err.append(e_pos)
