@@ -17,6 +17,7 @@ import pytest
 from scipy.optimize import linear_sum_assignment
 
 from superbody.edge import wire
+from superbody.edge.sim_source import SimSource
 from superbody.edge.simulator import SimCamera, World
 from superbody.edge.site import load_site
 from superbody.host.aggregator import Aggregator
@@ -36,10 +37,10 @@ def replay(start_s: float, end_s: float) -> tuple[Aggregator, dict[int, list[int
     agg = Aggregator(SITE, AnalyticEstimator(SITE), "analytic")
     cams = {c.id: SimCamera(WORLD, c.id) for c in SITE.cameras}
     frames = []
-    for i, c in enumerate(SITE.cameras):
-        period, phase = S / c.fps, S / c.fps * i / len(SITE.cameras)
-        k = math.ceil((start_s * S - phase) / period)
-        while (t := int(k * period + phase)) <= end_s * S:
+    for c in SITE.cameras:  # each camera's capture instants, as its node's source schedules them
+        src = SimSource(SITE, c.id, seed=7, people=3)
+        k = math.ceil((start_s * S - src.phase_ns) / src.period_ns)
+        while (t := int(k * src.period_ns + src.phase_ns)) <= end_s * S:
             frames.append((t, c.id))
             k += 1
     ids: dict[int, list[int]] = {}
