@@ -1,7 +1,7 @@
 """Soak: the whole system under load for a long time, with a hostile phase in the middle.
 
     python benchmarks/soak.py [--minutes 30] [--cameras 10] [--people 10] [--fps 15]
-                              [--sample-every 60] [--warmup-minutes 5] [--json-out F]
+                              [--sample-every 60] [--warmup-minutes 5] [--prime-minutes 1] [--json-out F]
                               [--attack liveliness,oversize,garbage,future,flood | none]
     (make soak ARGS="..."; not part of the test suite)
 
@@ -14,6 +14,11 @@ From 40 % to 60 % of the run it attacks the host as a stranger on the network wo
 liveliness tokens with names outside the site, 5 oversize (600 KB) and 20 garbage payloads a
 second, 2 frames a second stamped 0.9 s ahead on a real camera's key, and 64 copies of a person
 per frame on two cameras' keys at 5 frames a second (more tracks than a PoseArray may carry).
+The same attack runs once before, for ``--prime-minutes`` from the first minute, inside the
+warm-up: the first attack a host meets brings some buffers to their high-water mark for good
+(64 tracks' worth of small blocks, onnxruntime's), a bounded step that the summary reports on
+its own (``first_attack_step_mb``); the slope after the warm-up then says whether a second,
+longer attack, and the hours around it, make memory *grow*. ``--prime-minutes 0`` leaves it out.
 
 At the end: the RSS slope after the warm-up (MB/min, least squares), arrays per minute, and the
 host's rejection counters. The host must keep publishing throughout and its memory stay flat.
@@ -119,8 +124,14 @@ class _Attacker:
 
 
 def main(minutes: float, cameras: int, people: int, fps: float, sample_every: float, warmup_min: float, json_out: str | None,
-         attack: frozenset[str] = frozenset(ATTACKS)) -> int:
+         attack: frozenset[str] = frozenset(ATTACKS), prime_min: float = 1.0) -> int:
     import zenoh
+
+    if prime_min < 0:
+        raise SystemExit(f"soak: --prime-minutes must be 0 or more, got {prime_min:g}")
+    if prime_min and not 1.0 + prime_min + sample_every / 60 <= warmup_min:
+        raise SystemExit(f"soak: the priming attack (minute 1 to {1 + prime_min:g}) must end a sample before the warm-up "
+                         f"({warmup_min:g} min) does; use a shorter --prime-minutes or a longer --warmup-minutes")
 
     site = ring_site(cameras)
     site = dataclasses.replace(site, cameras=tuple(dataclasses.replace(c, fps=fps) for c in site.cameras))
@@ -136,7 +147,8 @@ def main(minutes: float, cameras: int, people: int, fps: float, sample_every: fl
     procs["host"] = _spawn(["host", "run", "--site", str(site_file), *estimator, "--connect", endpoint, "--status-every", "10"],
                            tmp / "host.log")
     print(f"soak: {cameras} cameras x {people} people at {fps:g} fps, {minutes:g} min, estimator {estimator[-1]}, "
-          f"attack {','.join(a for a in ATTACKS if a in attack) or 'none'}; "
+          f"attack {','.join(a for a in ATTACKS if a in attack) or 'none'} (minutes {0.4 * minutes:g}-{0.6 * minutes:g}"
+          f"{f', and {1:g}-{1 + prime_min:g} in the warm-up' if prime_min else ''}); "
           f"logs in {tmp}", flush=True)
     lock = threading.Lock()
     window = {"arrays": 0, "people": []}
@@ -155,8 +167,10 @@ def main(minutes: float, cameras: int, people: int, fps: float, sample_every: fl
     conf = transport.session_config("peer", connect=[endpoint])
     start = time.monotonic()
     end = start + minutes * 60
-    hostile = (start + 0.4 * minutes * 60, start + 0.6 * minutes * 60)
-    attacker = None
+    phases = [(start + 0.4 * minutes * 60, start + 0.6 * minutes * 60)]
+    if prime_min:
+        phases.insert(0, (start + 60.0, start + (1.0 + prime_min) * 60))
+    attacker, sent = None, Counter()
     try:
         with zenoh.open(conf) as session:
             subs = [session.declare_subscriber(transport.people_key(site.name), on_people),
@@ -167,14 +181,17 @@ def main(minutes: float, cameras: int, people: int, fps: float, sample_every: fl
                     if p.poll() is not None:
                         raise RuntimeError(f"{name} exited with {p.returncode}; see {tmp}")
                 now = time.monotonic()
-                if attacker is None and hostile[0] <= now < hostile[1]:
+                if attacker is None and phases and phases[0][0] <= now < phases[0][1]:
                     attacker = _Attacker(session, site, attack)
                     attacker.thread.start()
                     print("soak: hostile phase starts", flush=True)
-                if attacker is not None and now >= hostile[1] and not attacker.stop.is_set():
+                if attacker is not None and now >= phases[0][1]:
                     attacker.stop.set()
                     attacker.thread.join(timeout=10)
+                    sent.update(attacker.sent)
                     print(f"soak: hostile phase ends: sent {dict(attacker.sent)}", flush=True)
+                    attacker = None
+                    phases.pop(0)
                 if now >= next_sample:
                     with lock:
                         arrays, ppl = window["arrays"], window["people"]
@@ -202,19 +219,25 @@ def main(minutes: float, cameras: int, people: int, fps: float, sample_every: fl
     # is judged apart from it: before the attack and after it.
     hostile_end_min = 0.6 * minutes
     before = [s for s in after if not s["hostile"] and s["t_min"] < 0.4 * minutes + 1e-9]
+    # The priming attack's step: the last sample before it against the last one of the warm-up.
+    pre = [s["rss_mb"] for s in samples if s["t_min"] <= 1.0 + 1e-9]
+    warm = [s["rss_mb"] for s in samples if s["t_min"] <= warmup_min + 1e-9]
+    first_step = warm[-1] - pre[-1] if prime_min and pre and warm else float("nan")
     post = [s for s in samples if s["t_min"] > hostile_end_min + sample_every / 60]
     apm = [s["arrays_per_min"] for s in samples]
     summary = {
         "minutes": minutes, "cameras": cameras, "attack": [a for a in ATTACKS if a in attack], "people": people, "fps": fps, "samples": samples,
         "rss_slope_mb_per_min_after_warmup": slope, "warmup_minutes": warmup_min,
         "rss_slope_mb_per_min_before_attack": slope_of(before), "rss_slope_mb_per_min_after_attack": slope_of(post),
+        "prime_minutes": prime_min, "first_attack_step_mb": first_step,
         "arrays_per_min": {"min": min(apm) if apm else 0, "max": max(apm) if apm else 0},
         "host_rejected": last_status.get("rejected", {}), "host_queue_dropped": last_status.get("queue_dropped"),
-        "attack_sent": dict(attacker.sent) if attacker else {},
+        "attack_sent": dict(sent),
     }
     print(f"soak: RSS slope after {warmup_min:g} min warm-up: {slope:+.3f} MB/min over {len(after)} samples "
           f"(before the attack {summary['rss_slope_mb_per_min_before_attack']:+.3f} over {len(before)}, "
           f"after it {summary['rss_slope_mb_per_min_after_attack']:+.3f} over {len(post)}); "
+          f"{f'the first attack (in the warm-up) stepped it {first_step:+.1f} MB; ' if prime_min else ''}"
           f"arrays/min min {summary['arrays_per_min']['min']:.0f} max {summary['arrays_per_min']['max']:.0f}; "
           f"host rejected {summary['host_rejected']}")
     if json_out:
@@ -237,8 +260,10 @@ if __name__ == "__main__":
     ap.add_argument("--fps", type=float, default=15.0)
     ap.add_argument("--sample-every", type=float, default=60.0, help="seconds between samples (default 60)")
     ap.add_argument("--warmup-minutes", type=float, default=5.0)
+    ap.add_argument("--prime-minutes", type=float, default=1.0,
+                    help="length of the first attack, from minute 1, inside the warm-up (default 1; 0: none)")
     ap.add_argument("--json-out")
     ap.add_argument("--attack", type=_attacks, default=frozenset(ATTACKS),
                     help=f"comma-separated hostile-phase components, any of {','.join(ATTACKS)}, or none (default: all)")
     a = ap.parse_args()
-    sys.exit(main(a.minutes, a.cameras, a.people, a.fps, a.sample_every, a.warmup_minutes, a.json_out, a.attack))
+    sys.exit(main(a.minutes, a.cameras, a.people, a.fps, a.sample_every, a.warmup_minutes, a.json_out, a.attack, a.prime_minutes))

@@ -40,6 +40,7 @@ from superbody.host import pose as pose_msg
 from superbody.host import status as host_status
 from superbody.host.estimator import Estimator, estimate_detailed
 from superbody.host.filter import FilterConfig, PoseFilter, update_many
+from superbody.host.memory import release_free_memory
 from superbody.host.tracker import Tracker, TrackerConfig
 
 __all__ = ["HostConfig", "Aggregator", "run_host", "confidence"]
@@ -373,6 +374,7 @@ def run_host(
                          len(aggregator.cameras_alive), len(site.cameras), ",".join(status.cameras_alive) or "-",
                          len(arr.people), status.obs_per_s, p50, p99, rej, counters["queue_dropped"])
                 last_status, obs_since_status = last_pub, 0
+                release_free_memory()  # what a burst of work left free goes back to the system (host.memory)
         sub.undeclare()
         status_pub.undeclare()
         live.undeclare()
