@@ -159,7 +159,7 @@ def undistort(uv: NDArray, cam: Camera) -> NDArray[np.float64]:
     it to machine precision, so ``project`` inverts it to well under 1e-6 px.
     """
     uv = np.atleast_2d(np.asarray(uv, dtype=np.float64))
-    xd = (uv - [cam.cx, cam.cy]) / [cam.fx, cam.fy]  # (N, 2) distorted, normalised
+    xd = (uv - np.array([cam.cx, cam.cy])) / np.array([cam.fx, cam.fy])  # (N, 2) distorted, normalised
     if not np.any(cam.D) or len(uv) == 0:
         return xd
     guess = cv2.undistortPoints(
@@ -205,8 +205,15 @@ def normalised_to_rays(xn: NDArray, R: NDArray) -> NDArray[np.float64]:
         (..., 3) unit directions: R [x, y, 1], normalised.
     """
     xn = np.asarray(xn, dtype=np.float64)
+    R = np.asarray(R, dtype=np.float64)
     d_cam = np.concatenate([xn, np.ones((*xn.shape[:-1], 1))], axis=-1)  # (..., 3)
-    d = np.matmul(np.asarray(R, dtype=np.float64), d_cam[..., None])[..., 0]  # (..., 3) rotated into the world
+    # Rotated into the world, d = R d_cam, as few matrix products as the rotations allow.
+    if R.ndim == 2:  # one camera: all rows at once, d^T = d_cam^T R^T
+        d = d_cam @ R.T
+    elif R.ndim == d_cam.ndim + 1 and R.shape[-3] == 1:  # (..., 1, 3, 3): one camera per row of points
+        d = d_cam @ np.swapaxes(R[..., 0, :, :], -1, -2)
+    else:
+        d = np.matmul(R, d_cam[..., None])[..., 0]  # one per point
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
@@ -223,11 +230,11 @@ def intersect_plane(origin: NDArray, directions: NDArray, height: float | NDArra
         plane in front of its origin, shape (N,). Invalid rows are NaN.
     """
     directions = np.atleast_2d(directions)
-    origin = np.broadcast_to(np.asarray(origin, dtype=np.float64), directions.shape)
+    origin = np.asarray(origin, dtype=np.float64)  # (3,) or (N, 3): broadcasts against directions
     dz = directions[:, 2]
     with np.errstate(divide="ignore", invalid="ignore"):
         # origin_z + s * dz = height
-        s = (np.asarray(height, dtype=np.float64) - origin[:, 2]) / dz
+        s = (np.asarray(height, dtype=np.float64) - origin[..., 2]) / dz
     valid = np.isfinite(s) & (s > 0)
     points = origin + np.where(valid, s, np.nan)[:, None] * directions
     return points, valid

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
+from numpy.typing import NDArray
 
 from superbody.edge import transport, wire
 from superbody.edge.clock import WorldClock
@@ -43,7 +44,7 @@ from superbody.host.filter import FilterConfig, PoseFilter, update_many
 from superbody.host.memory import release_free_memory
 from superbody.host.tracker import Tracker, TrackerConfig
 
-__all__ = ["HostConfig", "Aggregator", "run_host", "confidence"]
+__all__ = ["HostConfig", "Aggregator", "run_host", "confidence", "confidences"]
 
 log = logging.getLogger("superbody.host")
 
@@ -99,6 +100,14 @@ def confidence(views: dict[str, PersonView]) -> float:
     scores = np.concatenate([v.keypoints[:, 2] for v in views.values()]) if views else np.zeros(0)  # one pass for all views
     total = float(scores[np.isfinite(scores)].sum(dtype=np.float64))  # nansum, without its copy
     return float(min(1.0, total / 25.0))
+
+
+def confidences(view_sets: list[dict[str, PersonView]]) -> NDArray[np.float64]:
+    """``confidence`` of each of a batch of non-empty view sets (B,), in one pass."""
+    scores = np.stack([v.keypoints[:, 2] for views in view_sets for v in views.values()])  # (V, 17)
+    per_view = np.where(np.isfinite(scores), scores, 0.0).sum(axis=1, dtype=np.float64)  # (V,)
+    starts = np.cumsum([0] + [len(views) for views in view_sets[:-1]])  # (B,) each set's first view
+    return np.minimum(1.0, np.add.reduceat(per_view, starts) / 25.0)
 
 
 class Aggregator:
@@ -209,11 +218,12 @@ class Aggregator:
             # The estimator's own sigma is the measurement noise: a poor single-view yaw moves a track less.
             fps = update_many(filters, stamps, est.pose[rows], est.std[rows])
             self.tracker.set_positions(tids, [(fp.x, fp.y) for fp in fps], stamps)
-            for i, tid, fp in zip(rows, tids, fps):
+            conf = confidences([sets[tid] for tid in tids]).tolist() if tids else []
+            for i, tid, fp, c in zip(rows, tids, fps, conf):
                 views = sets[tid]
                 self._poses[tid] = (pose_msg.PersonPose(
                     id=tid, x=fp.x, y=fp.y, yaw=fp.yaw, vx=fp.vx, vy=fp.vy, yaw_rate=fp.yaw_rate,
-                    cov=fp.cov, confidence=confidence(views), cameras=tuple(sorted(views)),
+                    cov=fp.cov, confidence=c, cameras=tuple(sorted(views)),
                     stamp_ns=newest[tid], views=len(views), estimator=est.source[i],
                 ), newest[tid])
         people = tuple(p for tid, (p, _) in sorted(self._poses.items()) if tid in sets)

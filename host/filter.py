@@ -25,6 +25,8 @@ from superbody.edge.angles import wrap_angle
 __all__ = ["predict", "update", "white_accel_noise", "FilterConfig", "FilteredPose", "PoseFilter", "update_many"]
 
 _NS = 1e-9
+_AX = np.arange(3)  # state indices of x, y, yaw
+_RATE = _AX + 3  # and of their rates
 
 
 def _T(a: NDArray) -> NDArray:
@@ -160,7 +162,6 @@ class FilteredPose:
 
 
 # State layout: (x, y, yaw, vx, vy, yaw_rate); position i's velocity is at i + 3.
-_H = np.hstack([np.eye(3), np.zeros((3, 3))])  # (3, 6) measures the pose, not its rates
 
 
 class PoseFilter:
@@ -297,24 +298,24 @@ def update_many(
     B = len(filters)
     if len(pose) != B or len(t_ns) != B:
         raise ValueError(f"update_many: {B} filters, {len(t_ns)} stamps and {len(pose)} poses must match")
-    stds: list[tuple[float, float, float] | None] = [None] * B
-    if meas_std is not None:
-        ms = np.asarray(meas_std, dtype=np.float64).reshape(B, 3)
-        good = np.isfinite(ms).all(axis=1) & (ms > 0).all(axis=1)
-        stds = [tuple(map(float, ms[i])) if good[i] else None for i in range(B)]  # type: ignore[misc]
+    ms = np.full((B, 3), np.nan) if meas_std is None else np.asarray(meas_std, dtype=np.float64).reshape(B, 3)
+    good = (np.isfinite(ms) & (ms > 0)).all(axis=1).tolist()  # (B,) rows that are a sigma; else the default
+    finite = np.isfinite(pose).all(axis=1).tolist()
     out: list[FilteredPose | None] = [None] * B
     batch: list[int] = []
-    finite = np.isfinite(pose).all(axis=1)
     for i, f in enumerate(filters):
         t = int(t_ns[i])
         if f.config.enabled and finite[i] and f._t is not None and f._t <= t and (t - f._t) * _NS <= f.config.reset_after_s:
             batch.append(i)
         else:
-            out[i] = f.update(t, float(pose[i, 0]), float(pose[i, 1]), float(pose[i, 2]), stds[i])
+            out[i] = f.update(t, float(pose[i, 0]), float(pose[i, 1]), float(pose[i, 2]), tuple(map(float, ms[i])) if good[i] else None)
     if batch:
         fs = [filters[i] for i in batch]
-        std = np.array([stds[i] or (filters[i].config.meas_std_xy_m, filters[i].config.meas_std_xy_m, filters[i].config.meas_std_yaw_rad)
-                        for i in batch])  # (n, 3)
+        std = ms[batch]  # (n, 3)
+        for k, i in enumerate(batch):
+            if not good[i]:
+                c = filters[i].config
+                std[k] = (c.meas_std_xy_m, c.meas_std_xy_m, c.meas_std_yaw_rad)
         for i, fp in zip(batch, _step(fs, np.array([int(t_ns[i]) for i in batch], dtype=np.int64), pose[batch], std)):
             out[i] = fp
     return out  # type: ignore[return-value]
@@ -339,17 +340,47 @@ def _predict_many(filters: Sequence[PoseFilter], t_ns: NDArray) -> tuple[NDArray
 
 def _step(filters: Sequence[PoseFilter], t_ns: NDArray, pose: NDArray, std: NDArray) -> list[FilteredPose]:
     """The plain predict + update of n filters with a state not newer than ``t_ns`` (n,), in one
-    batch: measurements ``pose`` (n, 3) of 1-sigma ``std`` (n, 3). Sets and returns their states."""
-    x, P = _predict_many(filters, t_ns)
-    yaw = wrap_angle(pose[:, 2])  # (n,)
-    # Unwrap each yaw measurement next to its predicted yaw: the innovation stays in (-pi, pi].
-    z = np.stack([pose[:, 0], pose[:, 1], x[:, 2, 0] + wrap_angle(yaw - x[:, 2, 0])], axis=1)[:, :, None]  # (n, 3, 1)
-    R = np.zeros((len(filters), 3, 3))
-    R[:, [0, 1, 2], [0, 1, 2]] = np.square(std)
-    x, P = update(x, P, z, _H, R)
-    x[:, 2, 0] = wrap_angle(x[:, 2, 0])
+    batch: measurements ``pose`` (n, 3) of 1-sigma ``std`` (n, 3). Sets and returns their states.
+
+    ``predict`` and ``update`` with this filter's F, Q, H and R, written out per element. The
+    three axes never mix: F and Q act on each (position, rate) pair alone, H reads the positions
+    and R is diagonal, so a covariance that starts with no cross-axis terms (every path of
+    ``PoseFilter`` starts one so) keeps none, and the 6 x 6 filter is three 2 x 2 filters. Same
+    numbers (tests/host/test_filter.py), without a batch of 6 x 6 products and a solve per step.
+    """
+    n = len(filters)
+    X = np.stack([f._x for f in filters])  # (n, 6)
+    P = np.stack([f._P for f in filters])  # (n, 6, 6)
+    dt = ((np.asarray(t_ns, dtype=np.int64) - np.array([f._t for f in filters], dtype=np.int64)) * _NS)[:, None]  # (n, 1)
+    q = np.square([(f.config.accel_std_mps2, f.config.accel_std_mps2, f.config.yaw_accel_std_radps2) for f in filters])  # (n, 3)
+    # Per axis i: the 2 x 2 covariance [[p00, p01], [p10, p11]] of (position i, rate i).
+    p00, p01, p10, p11 = P[:, _AX, _AX], P[:, _AX, _RATE], P[:, _RATE, _AX], P[:, _RATE, _RATE]  # (n, 3) each
+    # Predict: position += dt * rate;  P = F P F^T + Q, Q = q [[dt^4/4, dt^3/2], [dt^3/2, dt^2]]
+    dt2 = dt * dt
+    pos, rate = X[:, :3] + dt * X[:, 3:], X[:, 3:]  # (n, 3) each
+    pos[:, 2] = wrap_angle(pos[:, 2])
+    p00, p01, p10, p11 = (p00 + dt * (p01 + p10) + dt2 * p11 + q * dt2 * dt2 / 4, p01 + dt * p11 + q * dt2 * dt / 2,
+                          p10 + dt * p11 + q * dt2 * dt / 2, p11 + q * dt2)
+    # Update with z = the measured positions, the yaw unwrapped next to the predicted yaw (the
+    # innovation stays in (-pi, pi]);  S = p00 + R, K = [p00, p10] / S
+    z = np.column_stack([pose[:, 0], pose[:, 1], pos[:, 2] + wrap_angle(wrap_angle(pose[:, 2]) - pos[:, 2])])  # (n, 3)
+    R = np.square(std)  # (n, 3)
+    S = p00 + R
+    k0, k1 = p00 / S, p10 / S
+    y = z - pos
+    pos, rate = pos + k0 * y, rate + k1 * y
+    pos[:, 2] = wrap_angle(pos[:, 2])
+    # P = (I - K H) P (I - K H)^T + K R K^T (Joseph form), I - K H = [[1 - k0, 0], [-k1, 1]] per axis
+    a = 1.0 - k0
+    m00 = a * a * p00 + k0 * k0 * R
+    m01 = a * (p01 - k1 * p00) + k0 * k1 * R
+    m10 = a * (p10 - k1 * p00) + k0 * k1 * R
+    m11 = k1 * k1 * p00 - k1 * (p01 + p10) + p11 + k1 * k1 * R
+    X = np.concatenate([pos, rate], axis=1)  # (n, 6)
+    P = np.zeros((n, 6, 6))
+    P[:, _AX, _AX], P[:, _AX, _RATE], P[:, _RATE, _AX], P[:, _RATE, _RATE] = m00, m01, m10, m11
     out = []
     for k, f in enumerate(filters):
-        f._t, f._x, f._P = int(t_ns[k]), x[k, :, 0], P[k]
+        f._t, f._x, f._P = int(t_ns[k]), X[k], P[k]
         out.append(f._pose(f._t, f._x, f._P))
     return out

@@ -398,12 +398,13 @@ def _keep_best(view_sets: Sequence[Mapping[str, PersonView]], slots: list[list[t
 
 
 @lru_cache(maxsize=16)
-def _site_rays(site: Site) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+def _site_rays(site: Site) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
     """Per camera of the site: (fx, fy, cx, cy) (C, 4), R (C, 3, 3), t (C, 3), and whether it
-    has lens distortion (C,) (those go through ``edge.camera.undistort``)."""
+    has lens distortion (C,) (those go through ``edge.camera.undistort``); and the floor centre
+    on the floor, (x, y, 0) (3,), the origin of the "rays" features."""
     cams = site.cameras
     return (np.array([[c.fx, c.fy, c.cx, c.cy] for c in cams], dtype=np.float64), np.stack([c.R for c in cams]),
-            np.stack([c.t for c in cams]), np.array([bool(np.any(c.D)) for c in cams]))
+            np.stack([c.t for c in cams]), np.array([bool(np.any(c.D)) for c in cams]), np.array([*floor_centre(site), 0.0]))
 
 
 def build_batch(view_sets: Sequence[Mapping[str, PersonView]], site: Site, spec: GraphSpec, adjacency: bool = True) -> GraphBatch:
@@ -426,7 +427,8 @@ def build_batch(view_sets: Sequence[Mapping[str, PersonView]], site: Site, spec:
             person: those with the most detected joints.
     """
     st = _static(spec)
-    B, S, N, F, J = len(view_sets), spec.num_slots, spec.num_nodes, spec.num_features, NUM_KEYPOINTS
+    B, S, J = len(view_sets), spec.num_slots, NUM_KEYPOINTS
+    N, F = st.node_x.shape  # the spec's num_nodes and num_features, without rebuilding its feature names
     site_index = {c: i for i, c in enumerate(site.camera_ids)}
 
     # Gather the views into padded arrays: one Python pass, then everything is vectorised.
@@ -466,10 +468,11 @@ def build_batch(view_sets: Sequence[Mapping[str, PersonView]], site: Site, spec:
     vis = np.isfinite(uv_j).all(axis=2)  # (V, 17)
     n_vis = vis.sum(axis=1)  # (V,)
     uv_j = np.where(vis[:, :, None], uv_j, 0.0)  # (V, 17, 2)
-    score_j = np.where(vis, np.nan_to_num(kp[:, :, 2]), 0.0)  # (V, 17)
+    score_j = kp[:, :, 2]
+    score_j = np.where(vis & np.isfinite(score_j), score_j, 0.0)  # (V, 17)
     joint_centre = uv_j.sum(axis=1) / np.maximum(n_vis, 1)[:, None]  # (V, 2)
     box_ok = np.isfinite(box).all(axis=1) & (box[:, 2] > box[:, 0]) & (box[:, 3] > box[:, 1])  # (V,)
-    box_centre = np.stack([box[:, 0] + box[:, 2], box[:, 1] + box[:, 3]], axis=1) / 2  # (V, 2)
+    box_centre = (box[:, :2] + box[:, 2:]) / 2  # (V, 2)
     uv_body = np.where(box_ok[:, None], box_centre, joint_centre)  # (V, 2)
     uv = np.concatenate([uv_body[:, None], uv_j], axis=1)  # (V, 18, 2) pixels
     present = np.concatenate([np.ones((V, 1), bool), vis], axis=1)  # (V, 18)
@@ -485,13 +488,12 @@ def build_batch(view_sets: Sequence[Mapping[str, PersonView]], site: Site, spec:
     if spec.use_3d:
         p3 = np.stack(pts).astype(np.float64) if V else np.zeros((0, J, 3))  # (V, 17, 3) camera frame
     if spec.variant == "rays" or spec.geometry:
-        origin = np.array([*floor_centre(site), 0.0])  # (3,)
         # Every present node's ray, all views at once (edge.camera.pixel_to_ray per camera, in one
         # pass): normalised coordinates; cameras with lens distortion undistort their pixels.
-        f_c, R_c, t_c, distorted = _site_rays(site)
+        f_c, R_c, t_c, distorted, origin = _site_rays(site)  # origin (3,): the floor centre
         k = f_c[c_idx]  # (V, 4)
         xn = (uv - k[:, None, 2:]) / k[:, None, :2]  # (V, 18, 2) normalised image coordinates
-        for c in np.unique(c_idx[distorted[c_idx]]):
+        for c in np.unique(c_idx[distorted[c_idx]]) if distorted.any() else ():
             sel = c_idx == c  # (V,)
             sub = present[sel]  # (v, 18)
             x_c = xn[sel]

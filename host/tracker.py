@@ -290,17 +290,17 @@ def _predict_positions(x: NDArray, P: NDArray, dt: NDArray, accel_std_mps2: floa
         P: (B, 2, 2) covariances, shared by the x and y columns.
     """
     dt = np.asarray(dt, dtype=np.float64)[:, None]  # (B, 1)
-    q = accel_std_mps2 * accel_std_mps2
     # x = F x: position += dt * velocity
-    x = np.stack([x[:, 0] + dt * x[:, 1], x[:, 1]], axis=1)  # (B, 2, 2)
-    # P = F P F^T + Q, Q = q [[dt^4/4, dt^3/2], [dt^3/2, dt^2]]
-    p00, p01, p10, p11 = P[:, 0, 0:1], P[:, 0, 1:2], P[:, 1, 0:1], P[:, 1, 1:2]  # (B, 1) each
-    dt2 = dt * dt
-    n00 = p00 + dt * (p01 + p10) + dt2 * p11 + q * dt2 * dt2 / 4
-    n01 = p01 + dt * p11 + q * dt2 * dt / 2
-    n10 = p10 + dt * p11 + q * dt2 * dt / 2
-    n11 = p11 + q * dt2
-    return x, np.concatenate([n00, n01, n10, n11], axis=1).reshape(-1, 2, 2)
+    x = x.copy()
+    x[:, 0] += dt * x[:, 1]
+    # P = F P F^T + Q: F P adds dt x row 1 to row 0, then (F P) F^T dt x column 1 to column 0
+    P = P.copy()
+    P[:, 0] += dt * P[:, 1]
+    P[:, :, 0] += dt * P[:, :, 1]
+    # Q = q g g^T, g = (dt^2 / 2, dt): q [[dt^4/4, dt^3/2], [dt^3/2, dt^2]]
+    g = np.concatenate([0.5 * dt * dt, dt], axis=1) * accel_std_mps2  # (B, 2)
+    P += g[:, :, None] * g[:, None, :]
+    return x, P
 
 
 def _update_positions(x: NDArray, P: NDArray, z: NDArray, R: NDArray) -> tuple[NDArray, NDArray]:
@@ -328,27 +328,31 @@ def _update_positions(x: NDArray, P: NDArray, z: NDArray, R: NDArray) -> tuple[N
 def _fuse_positions(tracks: list[Track], xy: NDArray, sigma: NDArray, t_ns: int | NDArray, accel_std_mps2: float) -> None:
     """Kalman-update the positions of ``tracks`` with floor points (B, 2) of 1-sigma (B,), seen
     at ``t_ns`` (one time, or (B,) one per track)."""
-    t_all = np.broadcast_to(np.asarray(t_ns, dtype=np.int64), (len(tracks),))  # (B,)
-    seen = np.array([tr._kf_t is not None for tr in tracks], dtype=bool)
-    for j in np.flatnonzero(~seen):  # first point: the velocity is unknown
-        tr = tracks[j]
-        tr._kf_t = int(t_all[j])
-        tr._kf_x = np.vstack([xy[j], np.zeros(2)])
-        tr._kf_P = np.diag([sigma[j] ** 2, _INIT_SPEED_STD**2])
-    if not seen.any():
+    stamps = [int(t_ns)] * len(tracks) if np.ndim(t_ns) == 0 else [int(v) for v in t_ns]  # (B,)
+    rows: list[int] = []  # tracks with a state: predicted, then updated in one batch
+    for j, tr in enumerate(tracks):
+        if tr._kf_t is None:  # first point: the velocity is unknown
+            tr._kf_t = stamps[j]
+            tr._kf_x = np.vstack([xy[j], np.zeros(2)])
+            tr._kf_P = np.diag([sigma[j] ** 2, _INIT_SPEED_STD**2])
+        else:
+            rows.append(j)
+    if not rows:
         return
-    old = [tracks[j] for j in np.flatnonzero(seen)]
-    xy, sigma, t_old = xy[seen], sigma[seen], t_all[seen]
+    old = [tracks[j] for j in rows]
+    if len(rows) < len(tracks):
+        xy, sigma = xy[rows], sigma[rows]
+    t_old = [stamps[j] for j in rows]
     x = np.array([tr._kf_x for tr in old])  # (B, 2, 2)
     P = np.array([tr._kf_P for tr in old])  # (B, 2, 2)
-    dt = (t_old - np.array([tr._kf_t for tr in old], dtype=np.int64)) / _NS_PER_S  # (B,)
+    dt = np.array([t - tr._kf_t for t, tr in zip(t_old, old)], dtype=np.float64) / _NS_PER_S  # (B,)
     x, P = _predict_positions(x, P, np.maximum(dt, 0.0), accel_std_mps2)
     # A point older than the state (another camera's frame came late) is applied at the state's
     # time, with the distance the person may have walked since as extra noise.
     R = sigma**2 + (_INIT_SPEED_STD * np.minimum(dt, 0.0)) ** 2  # (B,)
     x, P = _update_positions(x, P, xy, R)
     for j, tr in enumerate(old):
-        tr._kf_x, tr._kf_P, tr._kf_t = x[j], P[j], max(tr._kf_t, int(t_old[j]))
+        tr._kf_x, tr._kf_P, tr._kf_t = x[j], P[j], max(tr._kf_t, t_old[j])
 
 
 @dataclass(frozen=True)
@@ -556,9 +560,9 @@ class Tracker:
         enough = n_joints >= cfg.min_joints
         st["too_few_joints"] += int(n - enough.sum())
         idx = np.flatnonzero(enough)  # (K,) the views we use
-        matches: list[Match] = [Match(i, None, "ignored") for i in range(n)]
         if len(idx) == 0:
-            return matches
+            return [Match(i, None, "ignored") for i in range(n)]
+        matches: list[Match | None] = [None] * n  # the views left None at the end were ignored
         bboxes = np.array([obs.people[i].bbox for i in idx])  # (K, 4)
         ground, sigma, _ = ground_points(kps[idx], bboxes, cam)  # (K, 2), (K,)
         has_ground = ~np.isnan(sigma)  # (K,)
@@ -613,7 +617,7 @@ class Tracker:
         if fused:
             rs = np.array([r for _, r in fused])
             _fuse_positions([tr for tr, _ in fused], ground[rs], sigma[rs], t, cfg.accel_std_mps2)
-        return matches
+        return [Match(i, None, "ignored") if m is None else m for i, m in enumerate(matches)]
 
     def _associate(
         self, t: int, tracks: list[Track], amps: NDArray, has_colour: NDArray,

@@ -13,7 +13,7 @@ from superbody.edge import wire
 from superbody.edge.angles import wrap_angle
 from superbody.edge.simulator import SimCamera, World
 from superbody.edge.site import load_site
-from superbody.host.aggregator import Aggregator, HostConfig, confidence
+from superbody.host.aggregator import Aggregator, HostConfig, confidence, confidences
 from superbody.host.analytic import AnalyticEstimator
 from superbody.host import pose as pose_msg
 from tests.conftest import WTF_SITE
@@ -120,6 +120,8 @@ def test_confidence_grows_with_what_was_seen():
     full = PersonView(np.tile(np.array([[100, 100, 0.9]], np.float32), (17, 1)), np.zeros(4, np.float32), np.zeros((16, 8), np.float32))
     assert 0 < confidence({"1": few}) < confidence({"1": full}) < confidence({"1": full, "2": full}) == 1.0
     assert confidence({}) == 0.0
+    sets = [{"1": few}, {"1": full, "2": few}, {"1": full, "2": full}, {"3": few, "1": few, "2": full}]
+    assert np.allclose(confidences(sets), [confidence(v) for v in sets], rtol=0, atol=1e-6)
 
 
 @pytest.mark.parametrize("field,value", [("freshness_s", 0), ("queue_size", 0), ("min_publish_hz", -1)])

@@ -205,3 +205,40 @@ def test_update_many_rejects_bad_input_like_update():
         update_many([PoseFilter()], [0], np.array([[math.nan, 0.0, 0.0]]))
     with pytest.raises(ValueError, match="must match"):
         update_many([PoseFilter()], [0, 1], np.zeros((1, 3)))
+
+
+def test_the_batched_step_is_the_textbook_six_state_filter():
+    # _step writes the filter out per axis; here the same step with predict() and update() on
+    # the full 6 x 6 matrices, for filters in mid-track (rates, cross terms within each axis).
+    from superbody.host.filter import _step, predict, update, white_accel_noise
+    from superbody.edge.angles import wrap_angle
+
+    rng = np.random.default_rng(5)
+    filters = [PoseFilter() for _ in range(5)]
+    for k, f in enumerate(filters):
+        f.update(0, *rng.normal(0, 2, 2), rng.uniform(-math.pi, math.pi))
+        for j in range(1, 6):  # build up rates and position-rate covariances
+            f.update(j * S // 10, *rng.normal(0, 2, 2), rng.uniform(-math.pi, math.pi), tuple(np.abs(rng.normal(0.3, 0.1, 3))))
+    before = [(f._t, f._x.copy(), f._P.copy()) for f in filters]
+    t = np.array([S // 2 + k * S // 30 for k in range(5)], dtype=np.int64)
+    pose = np.column_stack([rng.normal(0, 2, 5), rng.normal(0, 2, 5), rng.uniform(-3 * math.pi, 3 * math.pi, 5)])
+    std = np.abs(rng.normal(0.2, 0.05, (5, 3)))
+    got = _step(filters, t, pose, std)
+    H = np.hstack([np.eye(3), np.zeros((3, 3))])
+    for k, (t0, x0, P0) in enumerate(before):
+        c = filters[k].config
+        dt = (t[k] - t0) * 1e-9
+        F = np.eye(6)
+        F[[0, 1, 2], [3, 4, 5]] = dt
+        Q = np.zeros((6, 6))
+        for i, sa in enumerate((c.accel_std_mps2, c.accel_std_mps2, c.yaw_accel_std_radps2)):
+            Q[i::3, i::3] = white_accel_noise(dt, sa)
+        x, P = predict(x0, P0, F, Q)
+        x[2] = wrap_angle(x[2])
+        z = np.array([pose[k, 0], pose[k, 1], x[2] + wrap_angle(wrap_angle(pose[k, 2]) - x[2])])
+        x, P = update(x, P, z, H, np.diag(std[k] ** 2))
+        x[2] = wrap_angle(x[2])
+        g = got[k]
+        assert np.allclose([g.x, g.y, g.yaw, g.vx, g.vy, g.yaw_rate], x, atol=1e-12)
+        assert np.allclose(filters[k]._P, P, atol=1e-12)
+        assert np.allclose(g.cov, P[:3, :3], atol=1e-12)
