@@ -71,6 +71,7 @@ from tests.conftest import free_port  # noqa: E402
 MODEL = ROOT / "models" / "site-independent.int8.onnx"
 # The hostile phase's components (--attack selects some, to find which one costs what).
 ATTACKS = ("liveliness", "oversize", "garbage", "future", "flood")
+PRIME_START_MIN = 1.0  # the priming attack starts this many minutes in
 
 
 def _rss_mb(pid: int) -> float:
@@ -136,8 +137,8 @@ def main(minutes: float, cameras: int, people: int, fps: float, sample_every: fl
 
     if prime_min < 0:
         raise SystemExit(f"soak: --prime-minutes must be 0 or more, got {prime_min:g}")
-    if prime_min and not 1.0 + prime_min + sample_every / 60 <= warmup_min:
-        raise SystemExit(f"soak: the priming attack (minute 1 to {1 + prime_min:g}) must end a sample before the warm-up "
+    if prime_min and not PRIME_START_MIN + prime_min + sample_every / 60 <= warmup_min:
+        raise SystemExit(f"soak: the priming attack (minute {PRIME_START_MIN:g} to {PRIME_START_MIN + prime_min:g}) must end a sample before the warm-up "
                          f"({warmup_min:g} min) does; use a shorter --prime-minutes or a longer --warmup-minutes")
 
     site = ring_site(cameras)
@@ -155,7 +156,7 @@ def main(minutes: float, cameras: int, people: int, fps: float, sample_every: fl
                            tmp / "host.log")
     print(f"soak: {cameras} cameras x {people} people at {fps:g} fps, {minutes:g} min, estimator {estimator[-1]}, "
           f"attack {','.join(a for a in ATTACKS if a in attack) or 'none'} (minutes {0.4 * minutes:g}-{0.6 * minutes:g}"
-          f"{f', and {1:g}-{1 + prime_min:g} in the warm-up' if prime_min else ''}); "
+          f"{f', and {PRIME_START_MIN:g}-{PRIME_START_MIN + prime_min:g} in the warm-up' if prime_min else ''}); "
           f"logs in {tmp}", flush=True)
     lock = threading.Lock()
     window = {"arrays": 0, "people": []}
@@ -176,7 +177,7 @@ def main(minutes: float, cameras: int, people: int, fps: float, sample_every: fl
     end = start + minutes * 60
     phases = [(start + 0.4 * minutes * 60, start + 0.6 * minutes * 60)]
     if prime_min:
-        phases.insert(0, (start + 60.0, start + (1.0 + prime_min) * 60))
+        phases.insert(0, (start + PRIME_START_MIN * 60, start + (PRIME_START_MIN + prime_min) * 60))
     attacker, sent = None, Counter()
     phase_rss: list[float] = []  # the host's RSS as each hostile phase starts
     try:

@@ -198,8 +198,9 @@ def normalised_to_rays(xn: NDArray, R: NDArray) -> NDArray[np.float64]:
 
     Args:
         xn: (..., 2) normalised coordinates (``undistort``).
-        R: (..., 3, 3) camera-to-world rotations, broadcast against ``xn``'s leading axes
-            (one camera, or one per point).
+        R: camera-to-world rotations: (3, 3) for one camera, (..., 3, 3) with one axis fewer
+            than ``xn`` for one camera per row of points (e.g. per view, xn (V, K, 2), R (V, 3, 3)),
+            or (..., 3, 3) with as many for one per point.
 
     Returns:
         (..., 3) unit directions: R [x, y, 1], normalised.
@@ -207,13 +208,12 @@ def normalised_to_rays(xn: NDArray, R: NDArray) -> NDArray[np.float64]:
     xn = np.asarray(xn, dtype=np.float64)
     R = np.asarray(R, dtype=np.float64)
     d_cam = np.concatenate([xn, np.ones((*xn.shape[:-1], 1))], axis=-1)  # (..., 3)
-    # Rotated into the world, d = R d_cam, as few matrix products as the rotations allow.
-    if R.ndim == 2:  # one camera: all rows at once, d^T = d_cam^T R^T
-        d = d_cam @ R.T
-    elif R.ndim == d_cam.ndim + 1 and R.shape[-3] == 1:  # (..., 1, 3, 3): one camera per row of points
-        d = d_cam @ np.swapaxes(R[..., 0, :, :], -1, -2)
+    # Rotated into the world, d = R d_cam: one matrix product per camera where a camera's points
+    # form rows (d^T = d_cam^T R^T), else one per point.
+    if R.ndim <= d_cam.ndim:
+        d = d_cam @ np.swapaxes(R, -1, -2)
     else:
-        d = np.matmul(R, d_cam[..., None])[..., 0]  # one per point
+        d = np.matmul(R, d_cam[..., None])[..., 0]
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 

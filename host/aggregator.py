@@ -97,9 +97,7 @@ def confidence(views: dict[str, PersonView]) -> float:
     The sum over views of the detected joints' scores, over 25 (a person seen whole by one
     camera and half by another scores about 1). Use the covariance for uncertainty in metres.
     """
-    scores = np.concatenate([v.keypoints[:, 2] for v in views.values()]) if views else np.zeros(0)  # one pass for all views
-    total = float(scores[np.isfinite(scores)].sum(dtype=np.float64))  # nansum, without its copy
-    return float(min(1.0, total / 25.0))
+    return float(confidences([views])[0]) if views else 0.0
 
 
 def confidences(view_sets: list[dict[str, PersonView]]) -> NDArray[np.float64]:

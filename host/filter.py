@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from superbody.edge.angles import wrap_angle
 
-__all__ = ["predict", "update", "white_accel_noise", "FilterConfig", "FilteredPose", "PoseFilter", "update_many"]
+__all__ = ["predict", "update", "joseph_position_update", "white_accel_noise", "FilterConfig", "FilteredPose", "PoseFilter", "update_many"]
 
 _NS = 1e-9
 _AX = np.arange(3)  # state indices of x, y, yaw
@@ -82,6 +82,26 @@ def update(x: NDArray, P: NDArray, z: NDArray, H: NDArray, R: NDArray) -> tuple[
     I_KH = np.eye(P.shape[-1]) - K @ H
     P = I_KH @ P @ _T(I_KH) + K @ R @ _T(K)
     return x, P
+
+
+def joseph_position_update(p00: NDArray, p01: NDArray, p10: NDArray, p11: NDArray, R: NDArray) -> tuple[NDArray, ...]:
+    """``update`` of (position, rate) filters that measure the position (H = [1, 0]), per element.
+
+    Args:
+        p00, p01, p10, p11: the 2 x 2 covariances' elements, any one (broadcast) shape.
+        R: the measurement variances, same shape.
+
+    Returns:
+        ``(k0, k1, n00, n01, n10, n11)``: the gain K = (k0, k1) (the state moves by K times the
+        innovation) and the updated covariance, Joseph form with I - K H = [[1 - k0, 0], [-k1, 1]].
+    """
+    # S = H P H^T + R;  K = P H^T / S
+    S = p00 + R
+    k0, k1 = p00 / S, p10 / S
+    # P = (I - K H) P (I - K H)^T + K R K^T
+    a = 1.0 - k0
+    return (k0, k1, a * a * p00 + k0 * k0 * R, a * (p01 - k1 * p00) + k0 * k1 * R, a * (p10 - k1 * p00) + k0 * k1 * R,
+            k1 * k1 * p00 - k1 * (p01 + p10) + p11 + k1 * k1 * R)
 
 
 def white_accel_noise(dt: float | NDArray, sigma_a: float) -> NDArray[np.float64]:
@@ -362,20 +382,12 @@ def _step(filters: Sequence[PoseFilter], t_ns: NDArray, pose: NDArray, std: NDAr
     p00, p01, p10, p11 = (p00 + dt * (p01 + p10) + dt2 * p11 + q * dt2 * dt2 / 4, p01 + dt * p11 + q * dt2 * dt / 2,
                           p10 + dt * p11 + q * dt2 * dt / 2, p11 + q * dt2)
     # Update with z = the measured positions, the yaw unwrapped next to the predicted yaw (the
-    # innovation stays in (-pi, pi]);  S = p00 + R, K = [p00, p10] / S
+    # innovation stays in (-pi, pi])
     z = np.column_stack([pose[:, 0], pose[:, 1], pos[:, 2] + wrap_angle(wrap_angle(pose[:, 2]) - pos[:, 2])])  # (n, 3)
-    R = np.square(std)  # (n, 3)
-    S = p00 + R
-    k0, k1 = p00 / S, p10 / S
+    k0, k1, m00, m01, m10, m11 = joseph_position_update(p00, p01, p10, p11, np.square(std))  # (n, 3) each
     y = z - pos
     pos, rate = pos + k0 * y, rate + k1 * y
     pos[:, 2] = wrap_angle(pos[:, 2])
-    # P = (I - K H) P (I - K H)^T + K R K^T (Joseph form), I - K H = [[1 - k0, 0], [-k1, 1]] per axis
-    a = 1.0 - k0
-    m00 = a * a * p00 + k0 * k0 * R
-    m01 = a * (p01 - k1 * p00) + k0 * k1 * R
-    m10 = a * (p10 - k1 * p00) + k0 * k1 * R
-    m11 = k1 * k1 * p00 - k1 * (p01 + p10) + p11 + k1 * k1 * R
     X = np.concatenate([pos, rate], axis=1)  # (n, 6)
     P = np.zeros((n, 6, 6))
     P[:, _AX, _AX], P[:, _AX, _RATE], P[:, _RATE, _AX], P[:, _RATE, _RATE] = m00, m01, m10, m11

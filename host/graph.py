@@ -499,7 +499,7 @@ def build_batch(view_sets: Sequence[Mapping[str, PersonView]], site: Site, spec:
             x_c = xn[sel]
             x_c[sub] = undistort(uv[sel][sub], site.cameras[c])
             xn[sel] = x_c
-        rays = np.where(present[:, :, None], normalised_to_rays(xn, R_c[c_idx][:, None]), 0.0)  # (V, 18, 3) world frame
+        rays = np.where(present[:, :, None], normalised_to_rays(xn, R_c[c_idx]), 0.0)  # (V, 18, 3) world frame
         centres = t_c[c_idx] - origin  # (V, 3)
         if spec.use_3d and spec.variant == "rays":
             p3 = np.einsum("vij,vnj->vni", R_c[c_idx], p3) + centres[:, None]  # world frame, floor-centred

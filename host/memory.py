@@ -28,6 +28,7 @@ import ctypes
 import ctypes.util
 import logging
 import platform
+from functools import lru_cache
 from typing import Final
 
 __all__ = ["pin_mmap_threshold", "release_free_memory", "MMAP_THRESHOLD_BYTES"]
@@ -38,8 +39,12 @@ MMAP_THRESHOLD_BYTES: Final[int] = 128 * 1024  # glibc's own starting value
 _M_MMAP_THRESHOLD: Final[int] = -3  # from glibc's malloc.h
 
 
+@lru_cache(maxsize=1)
 def _libc() -> ctypes.CDLL | None:
-    """glibc, or None where the C library is something else (musl, macOS: nothing to do there)."""
+    """glibc, or None where the C library is something else (musl, macOS: nothing to do there).
+
+    Looked up once: ``find_library`` runs ``ldconfig`` (1.5 ms), and the host asks every status line.
+    """
     if platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
         return None
     try:

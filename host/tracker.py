@@ -60,6 +60,7 @@ from superbody.edge.body import NUM_KEYPOINTS
 from superbody.edge.colour import HIST_BINS, bhattacharyya_matrix
 from superbody.edge.observation import Observation, PersonView
 from superbody.edge.site import Site
+from superbody.host.filter import joseph_position_update
 from superbody.host.ground import ground_points
 from superbody.host.pose import MAX_PEOPLE
 
@@ -309,20 +310,11 @@ def _update_positions(x: NDArray, P: NDArray, z: NDArray, R: NDArray) -> tuple[N
     Args:
         x: (B, 2, 2) states; P: (B, 2, 2) covariances; z: (B, 2) measured (x, y); R: (B,) variances.
     """
-    p00, p01, p10, p11 = P[:, 0, 0], P[:, 0, 1], P[:, 1, 0], P[:, 1, 1]  # (B,) each
-    # S = H P H^T + R;  K = P H^T / S
-    S = p00 + R
-    k0, k1 = p00 / S, p10 / S  # (B,)
+    k0, k1, *n = joseph_position_update(P[:, 0, 0], P[:, 0, 1], P[:, 1, 0], P[:, 1, 1], R)  # (B,) each
     # x = x + K (z - H x)
     y = z - x[:, 0]  # (B, 2)
     x = np.stack([x[:, 0] + k0[:, None] * y, x[:, 1] + k1[:, None] * y], axis=1)  # (B, 2, 2)
-    # P = (I - K H) P (I - K H)^T + K R K^T (Joseph form), with I - K H = [[1 - k0, 0], [-k1, 1]]
-    a = 1.0 - k0
-    n00 = a * a * p00 + k0 * k0 * R
-    n01 = a * (p01 - k1 * p00) + k0 * k1 * R
-    n10 = a * (p10 - k1 * p00) + k0 * k1 * R
-    n11 = k1 * k1 * p00 - k1 * (p01 + p10) + p11 + k1 * k1 * R
-    return x, np.stack([n00, n01, n10, n11], axis=1).reshape(-1, 2, 2)
+    return x, np.stack(n, axis=1).reshape(-1, 2, 2)
 
 
 def _fuse_positions(tracks: list[Track], xy: NDArray, sigma: NDArray, t_ns: int | NDArray, accel_std_mps2: float) -> None:
