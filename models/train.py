@@ -6,7 +6,10 @@ fp32 and int8 ONNX, with the whole config stored in the model.
 Data: ``sim_samples`` samples simulated in the site (DS2-like; the "rays" variant can instead
 use ``random_sites`` random rooms, so the model never sees the serving layout), plus, if
 ``real`` is given, the samples of a WheresTheFellow file, repeated ``real_repeat`` times per
-epoch (DS1-like mix). Real ground truth is converted to the torso centre the product reports
+epoch (DS1-like mix), and with ``real_subset_repeat`` every proper subset of a real sample's views
+as well (one real frame seen by three cameras is also three real single-view frames and three
+two-view frames, with the same truth: real detector noise for the hard camera counts, in the
+places the multi-camera frames were taken). Real ground truth is converted to the torso centre the product reports
 (models.wtf.truth_to_torso). ``real_exclude`` holds out a contiguous range of the real file
 (cross-validation folds).
 
@@ -20,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import itertools
 import json
 import logging
 import math
@@ -37,7 +41,7 @@ from superbody.edge.site import Site, SiteError, load_site
 from superbody.host.graph import GraphBatch, GraphSpec, adjacency_template, build_batch, floor_centre, masked_adjacency
 from superbody.models.samples import Sample
 
-__all__ = ["TrainConfig", "TrainResult", "train", "prepare", "register"]
+__all__ = ["TrainConfig", "TrainResult", "train", "prepare", "view_subsets", "register"]
 
 log = logging.getLogger("superbody.train")
 
@@ -66,6 +70,7 @@ class TrainConfig:
     real_exclude: tuple[int, int] | None = None
     real_holdout: tuple[int, ...] = ()
     real_repeat: int = 20
+    real_subset_repeat: int = 0
     epochs: int = 40
     batch_size: int = 128
     lr: float = 2e-3
@@ -87,7 +92,7 @@ class TrainConfig:
         if self.random_sites and self.variant != "rays":
             raise ValueError("random_sites needs variant 'rays' (a 'site' model is tied to its site's cameras)")
         for name, lo, hi in (("sim_samples", 0, 5_000_000), ("random_sites", 0, 10_000), ("max_views", 1, 16), ("real_repeat", 1, 1000),
-                             ("epochs", 1, 10_000), ("batch_size", 1, 65_536), ("patience", 1, 10_000), ("threads", 1, 256)):
+                             ("real_subset_repeat", 0, 1000), ("epochs", 1, 10_000), ("batch_size", 1, 65_536), ("patience", 1, 10_000), ("threads", 1, 256)):
             v = getattr(self, name)
             if not (isinstance(v, int) and lo <= v <= hi):
                 raise ValueError(f"{name} must be an integer in [{lo}, {hi}], got {v!r}")
@@ -167,10 +172,23 @@ def _datasets(cfg: TrainConfig, site: Site, spec: GraphSpec, model, progress: bo
             drop |= set(range(*cfg.real_exclude))
         real = [s for i, s in enumerate(real) if i not in drop]
         real = [Sample(s.views, truth_to_torso(s.truth)[0], s.stamp_ns) for s in real]
-        x, m, y = prepare(real, site, spec, model)
-        parts.append((np.repeat(x, cfg.real_repeat, 0), np.repeat(m, cfg.real_repeat, 0), np.repeat(y, cfg.real_repeat, 0),
-                      np.ones(len(x) * cfg.real_repeat, np.float32)))
+        for group, repeat in ((real, cfg.real_repeat), (view_subsets(real) if cfg.real_subset_repeat else [], cfg.real_subset_repeat)):
+            if not group:
+                continue
+            x, m, y = prepare(group, site, spec, model)
+            parts.append((np.repeat(x, repeat, 0), np.repeat(m, repeat, 0), np.repeat(y, repeat, 0), np.ones(len(x) * repeat, np.float32)))
     return tuple(np.concatenate([p[i] for p in parts]) for i in range(4))  # type: ignore[return-value]
+
+
+def view_subsets(samples: list[Sample]) -> list[Sample]:
+    """Every proper, non-empty subset of each sample's views, as samples with the same truth
+    (a sample seen by k cameras gives 2^k - 2 of them; a single-view sample gives none)."""
+    out = []
+    for s in samples:
+        cams = sorted(s.views)
+        for k in range(1, len(cams)):
+            out.extend(Sample({c: s.views[c] for c in sub}, s.truth, s.stamp_ns) for sub in itertools.combinations(cams, k))
+    return out
 
 
 # -- training ---------------------------------------------------------------------------------------
@@ -330,6 +348,8 @@ def add_train_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--real", help="a WheresTheFellow JSON file to mix in (DS1-like)")
     p.add_argument("--real-exclude", type=_range, help="hold out real samples START:END")
     p.add_argument("--real-repeat", type=int, default=20, help="times each real sample is seen per epoch (default 20)")
+    p.add_argument("--real-subset-repeat", type=int, default=0,
+                   help="also train on every proper subset of each real sample's views, this many times per epoch (default 0: off)")
     p.add_argument("--epochs", type=int, default=40)
     p.add_argument("--batch-size", type=int, default=128)
     p.add_argument("--lr", type=float, default=2e-3)
@@ -345,7 +365,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     return TrainConfig(
         site=args.site, arch=args.arch, variant=args.variant, use_3d=args.use_3d, max_views=args.max_views, geometry=args.geometry, hparams=args.hparams,
         sim_samples=args.sim_samples, sim_seed=args.sim_seed, random_sites=args.random_sites, real=args.real,
-        real_exclude=args.real_exclude, real_repeat=args.real_repeat, epochs=args.epochs, batch_size=args.batch_size,
+        real_exclude=args.real_exclude, real_repeat=args.real_repeat, real_subset_repeat=args.real_subset_repeat, epochs=args.epochs, batch_size=args.batch_size,
         lr=args.lr, patience=args.patience, seed=args.seed, max_minutes=args.max_minutes, threads=args.threads, init=args.init,
     )
 

@@ -53,7 +53,8 @@ def test_eval_on_dev_json(tiny, dev_json, tmp_path):
 def test_crossval_predicts_every_sample_from_a_model_that_never_saw_it(split, dev_json, tmp_path):
     out, npz = tmp_path / "cv.json", tmp_path / "cv.npz"
     r = _cli("crossval", "--site", str(WTF_SITE), "--real", str(dev_json), "--folds", "3", "--arch", "mlp", "--split", split,
-             "--sim-samples", "300", "--epochs", "1", "--real-repeat", "2", "--json-out", str(out), "--predictions-out", str(npz))
+             "--sim-samples", "300", "--epochs", "1", "--real-repeat", "2", "--real-subset-repeat", "1",
+             "--json-out", str(out), "--predictions-out", str(npz))
     assert r.returncode == 0, r.stderr[-2000:]
     doc = json.loads(out.read_text())
     held = [f["held_out"] for f in doc["folds"]]
@@ -92,7 +93,25 @@ def test_calibrate_hybrid_writes_the_model_that_the_host_then_runs_as_hybrid(tin
 
 
 # (arguments, text the one-line error must contain)
+def test_view_subsets_are_every_proper_subset_of_a_real_frame_with_its_truth(dev_json):
+    from superbody.models.train import view_subsets
+    from superbody.models.wtf import load_wtf
+
+    samples = load_wtf(dev_json)
+    by_count = {k: [s for s in samples if len(s.views) == k] for k in (1, 2, 3)}
+    assert all(by_count.values())
+    assert view_subsets(by_count[1]) == []  # nothing smaller than one view
+    subs = view_subsets(by_count[3][:1])
+    assert sorted(len(s.views) for s in subs) == [1, 1, 1, 2, 2, 2]
+    assert len({tuple(sorted(s.views)) for s in subs}) == 6  # all distinct
+    for s in subs:
+        np.testing.assert_array_equal(s.truth, by_count[3][0].truth)
+        assert all(s.views[c] is by_count[3][0].views[c] for c in s.views)
+    assert len(view_subsets(samples)) == 6 * len(by_count[3]) + 2 * len(by_count[2])
+
+
 BAD = [
+    (["train", "--site", str(WTF_SITE), "--real-subset-repeat", "-1"], "real_subset_repeat must be an integer in [0, 1000]"),
     (["train", "--site", "nope.toml"], "cannot read site file"),
     (["train", "--site", str(WTF_SITE), "--arch", "transformer"], "invalid choice"),
     (["train", "--site", str(WTF_SITE), "--sim-samples", "0"], "nothing to train on"),
