@@ -4,16 +4,18 @@ Per person, the network (``host.estimator.OnnxEstimator``) gives a pose and its 
 (``pose_std``, scaled by the calibration in the model's metadata), and the analytic estimator
 (``host.analytic``) gives a pose whose 1-sigma depends on how many cameras saw the person and on
 whether a shoulder or hip pair was seen (measured on real data, stored in the model's metadata
-as ``hybrid.calibration``). Then:
+as ``hybrid.calibration``, with the geometry's typical yaw error per camera count, which is
+subtracted from its yaw first). Then:
 
 1. **Support gate.** Where the network has never been trained (its position, or the
    geometry's, more than ``floor_margin_m`` outside the site's floor polygon), the pose is the
    analytic one: label ``"analytic"``.
 2. **Fusion.** Otherwise each of x, y and yaw is the inverse-variance weighted mean of the two
    (yaw as a weighted mean of unit vectors), with sigma = (t/s_net^2 + 1/s_geo^2)^-1/2, where the
-   trust t per axis and camera count was fitted on held-out real data (a network whose real
-   errors are biased deserves less weight than its sigma says): label ``"hybrid"``. Where the
-   geometry found nothing, the network's pose: label ``"onnx"``.
+   trust t per camera count, one for position and one for yaw, was fitted on held-out real data
+   (a network whose real errors are biased deserves less weight than its sigma says; 0 leaves
+   it to geometry): label ``"hybrid"``. Where the geometry found nothing, the network's pose:
+   label ``"onnx"``.
 
 The fused sigma is what the host's filter uses as the measurement noise.
 """
@@ -28,6 +30,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
+from superbody.edge.angles import wrap_angle
 from superbody.edge.floor import point_in_polygon
 from superbody.edge.observation import PersonView
 from superbody.edge.site import Site
@@ -54,6 +57,9 @@ class HybridCalibration:
             fusion; 0 leaves the axis to geometry (a network whose errors on real data are biased
             is less useful than its sigma says: fitted on held-out real data).
         floor_margin_m: support gate: how far outside the floor polygon a pose may be.
+        analytic_bias: per camera count 1, 2, 3+, the analytic pose's typical error (x m, y m,
+            yaw rad; the median, measured on real data), subtracted from it before it is used:
+            e.g. a yaw convention of the site's ground truth that differs from the shoulder line.
         source: how the numbers were measured (free text, for the model card).
     """
 
@@ -61,6 +67,7 @@ class HybridCalibration:
     analytic_yaw_std_no_pair: float = 3.0
     net_trust: tuple[tuple[float, float, float], ...] = ((1.0, 1.0, 1.0),) * 3
     floor_margin_m: float = 0.5
+    analytic_bias: tuple[tuple[float, float, float], ...] = ((0.0, 0.0, 0.0),) * 3
     source: str = ""
 
     def __post_init__(self) -> None:
@@ -72,10 +79,13 @@ class HybridCalibration:
             raise ValueError(f"analytic_yaw_std_no_pair must be in (0, 100) radians, got {self.analytic_yaw_std_no_pair!r}")
         if not 0 <= self.floor_margin_m <= 10:
             raise ValueError(f"floor_margin_m must be in [0, 10] metres, got {self.floor_margin_m!r}")
+        if len(self.analytic_bias) != 3 or any(len(b) != 3 or not all(abs(v) <= 10 for v in b) for b in self.analytic_bias):
+            raise ValueError(f"analytic_bias must be 3 rows (1, 2, 3+ cameras) of 3 values in [-10, 10], got {self.analytic_bias!r}")
 
     def to_json(self) -> str:
         return json.dumps({"analytic_std": [list(s) for s in self.analytic_std], "analytic_yaw_std_no_pair": self.analytic_yaw_std_no_pair,
-                           "net_trust": [list(s) for s in self.net_trust], "floor_margin_m": self.floor_margin_m, "source": self.source})
+                           "net_trust": [list(s) for s in self.net_trust], "floor_margin_m": self.floor_margin_m,
+                           "analytic_bias": [list(b) for b in self.analytic_bias], "source": self.source})
 
     @classmethod
     def from_json(cls, text: str) -> "HybridCalibration":
@@ -83,13 +93,18 @@ class HybridCalibration:
         return cls(analytic_std=tuple(tuple(float(v) for v in s) for s in d["analytic_std"]),
                    analytic_yaw_std_no_pair=float(d.get("analytic_yaw_std_no_pair", 3.0)),
                    net_trust=tuple(tuple(float(v) for v in s) for s in d.get("net_trust", ((1.0, 1.0, 1.0),) * 3)),
-                   floor_margin_m=float(d.get("floor_margin_m", 0.5)), source=str(d.get("source", "")))
+                   floor_margin_m=float(d.get("floor_margin_m", 0.5)),
+                   analytic_bias=tuple(tuple(float(v) for v in b) for b in d.get("analytic_bias", ((0.0, 0.0, 0.0),) * 3)), source=str(d.get("source", "")))
 
-    def net_sigmas(self, net_std: NDArray, cameras: NDArray) -> NDArray[np.float64]:
-        """(B, 3) the network's sigmas as the fusion weighs them: sigma / sqrt(trust) (inf at 0)."""
-        trust = np.asarray(self.net_trust, dtype=np.float64)[np.clip(np.asarray(cameras, int), 1, 3) - 1]  # (B, 3)
-        with np.errstate(divide="ignore"):
-            return np.asarray(net_std, np.float64) / np.sqrt(trust)
+    def trust(self, cameras: NDArray) -> NDArray[np.float64]:
+        """(B, 3) the trust factors (x, y, yaw) for camera counts (B,)."""
+        return np.asarray(self.net_trust, dtype=np.float64)[np.clip(np.asarray(cameras, int), 1, 3) - 1]
+
+    def debias(self, geo: NDArray, cameras: NDArray) -> NDArray[np.float64]:
+        """(B, 3) analytic poses less their calibrated bias (yaw wrapped to (-pi, pi])."""
+        out = np.asarray(geo, np.float64) - np.asarray(self.analytic_bias, np.float64)[np.clip(np.asarray(cameras, int), 1, 3) - 1]
+        out[:, 2] = wrap_angle(out[:, 2])
+        return out
 
     def analytic_sigmas(self, cameras: NDArray, pair: NDArray) -> NDArray[np.float64]:
         """(B, 3) analytic 1-sigma for camera counts (B,) and shoulder-or-hip-pair flags (B,)."""
@@ -99,25 +114,35 @@ class HybridCalibration:
         return s
 
 
-def fuse(net: NDArray, net_std: NDArray, geo: NDArray, geo_std: NDArray) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def fuse(net: NDArray, net_std: NDArray, geo: NDArray, geo_std: NDArray, trust: NDArray | float = 1.0) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Inverse-variance fusion of two pose estimates.
 
     Args:
         net, geo: (B, 3) poses (x, y, yaw).
         net_std, geo_std: (B, 3) their 1-sigmas.
+        trust: (B, 3) or scalar factor on the network's weight (its precision 1/sigma^2 times
+            this; 0 leaves an axis to the geometry). It moves the weights, not what each input
+            is worth: the returned sigma is that of the weighted mean of two independent
+            estimates with the given sigmas, so a trust above 1 does not make the result
+            surer than the network.
 
     Returns:
         ``(pose, std)``, (B, 3) each; yaw in (-pi, pi].
     """
-    w_n, w_g = 1.0 / np.square(net_std), 1.0 / np.square(geo_std)  # (B, 3)
-    w = w_n + w_g
-    xy = (w_n[:, :2] * net[:, :2] + w_g[:, :2] * geo[:, :2]) / w[:, :2]  # (B, 2)
-    # yaw: the weighted mean direction of the two unit vectors
-    s = w_n[:, 2] * np.sin(net[:, 2]) + w_g[:, 2] * np.sin(geo[:, 2])
-    c = w_n[:, 2] * np.cos(net[:, 2]) + w_g[:, 2] * np.cos(geo[:, 2])
-    yaw = np.arctan2(s, c)
-    yaw = np.where(yaw <= -np.pi, np.pi, yaw)
-    return np.column_stack([xy, yaw]), 1.0 / np.sqrt(w)
+    trust = np.broadcast_to(np.asarray(trust, np.float64), np.shape(net_std))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w_n = np.where(trust > 0, trust / np.square(net_std), 0.0)  # (B, 3)
+        w_g = 1.0 / np.square(geo_std)
+        w = w_n + w_g
+        xy = (w_n[:, :2] * net[:, :2] + w_g[:, :2] * geo[:, :2]) / w[:, :2]  # (B, 2)
+        # yaw: the weighted mean direction of the two unit vectors
+        s = w_n[:, 2] * np.sin(net[:, 2]) + w_g[:, 2] * np.sin(geo[:, 2])
+        c = w_n[:, 2] * np.cos(net[:, 2]) + w_g[:, 2] * np.cos(geo[:, 2])
+        yaw = np.arctan2(s, c)
+        yaw = np.where(yaw <= -np.pi, np.pi, yaw)
+        # var(sum w_i x_i / sum w_i) for independent x_i; at trust 1 it is 1 / (w_n + w_g)
+        var = (np.where(w_n > 0, np.square(w_n * net_std), 0.0) + np.square(w_g * geo_std)) / np.square(w)
+    return np.column_stack([xy, yaw]), np.sqrt(var)
 
 
 class HybridEstimator:
@@ -172,8 +197,9 @@ def combine(
     Returns:
         (B, 3) poses, (B, 3) 1-sigmas and (B,) sources ("hybrid", "onnx", "analytic").
     """
+    geo = calibration.debias(geo, cameras)
     geo_std = calibration.analytic_sigmas(cameras, pair)
-    pose, std = fuse(net, calibration.net_sigmas(net_std, cameras), geo, geo_std)
+    pose, std = fuse(net, net_std, geo, geo_std, calibration.trust(cameras))
     has_geo = np.isfinite(geo[:, :2]).all(1)
     m = calibration.floor_margin_m
     outside = ~(_near_floor(net[:, :2], site, m) & np.where(has_geo, _near_floor(np.nan_to_num(geo[:, :2]), site, m), True))

@@ -203,6 +203,8 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
     print("analytic sigma by cameras (x mm, y mm, yaw deg): " + "; ".join(
         f"{k}: {s[0] * 1000:.0f}, {s[1] * 1000:.0f}, {np.degrees(s[2]):.1f}" for k, s in zip((1, 2, 3), cal.analytic_std))
         + f"; yaw without a shoulder/hip pair {np.degrees(cal.analytic_yaw_std_no_pair):.0f} deg")
+    print("analytic bias by cameras (x mm, y mm, yaw deg), subtracted: " + "; ".join(
+        f"{k}: {b[0] * 1000:.0f}, {b[1] * 1000:.0f}, {np.degrees(b[2]):.1f}" for k, b in zip((1, 2, 3), cal.analytic_bias)))
     print("trust in the network (x, y, yaw) by cameras: " + "; ".join(f"{k}: {', '.join(f'{v:g}' for v in row)}" for k, row in zip((1, 2, 3), cal.net_trust)))
     for name, cov in coverage.items():
         print(f"{name}: errors within 1 sigma (x, y, yaw) {', '.join(f'{v:.2f}' for v in cov['within_1_sigma'])}; "

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -71,6 +72,20 @@ def _sigma_table(cov: dict | None) -> list[str]:
     return out + ["", "A calibrated Gaussian gives 0.68 within 1 sigma and 0.95 within 2."]
 
 
+def _calibration_table(doc: dict | None) -> list[str]:
+    """The shipped hybrid calibration (``superbody calibrate hybrid``'s JSON) as a table."""
+    if not doc or "calibration" not in doc:
+        return ["(not run)"]
+    c, scale = doc["calibration"], doc["std_scale"]
+    out = ["| cameras | trust: position / yaw | network sigma scale x / y / yaw | geometry sigma x mm / y mm / yaw deg | geometry yaw bias deg |",
+           "| --- | --- | --- | --- | --- |"]
+    for k in range(3):
+        t, sc, a, b = c["net_trust"][k], scale[k], c["analytic_std"][k], c.get("analytic_bias", [[0, 0, 0]] * 3)[k]
+        out.append(f"| {k + 1}{'+' if k == 2 else ''} | {t[0]:g} / {t[2]:g} | {sc[0]:.2f} / {sc[1]:.2f} / {sc[2]:.2f} | "
+                   f"{1000 * a[0]:.0f} / {1000 * a[1]:.0f} / {math.degrees(a[2]):.1f} | {math.degrees(b[2]):+.1f} |")
+    return out
+
+
 def _cv_section(title: str, text: str, doc: dict | None) -> list[str]:
     L = ["", f"### {title}", "", text, ""]
     if not doc:
@@ -115,7 +130,8 @@ def main(out_dir: Path, card: Path) -> int:
          "and the network's own 1-sigma of x, y (a Gaussian head) and yaw (a von Mises head), trained on a detached copy so that it never moves the pose.",
          "- **The host runs it as a hybrid** (`host/hybrid.py`): per person, the network's pose and the analytic (triangulation) pose are fused "
          "by inverse variance; the network's sigmas are scaled per camera count to its errors on held-out real data, the geometry's sigmas are "
-         "measured per camera count on dev.json, and a trust factor per camera count and axis (fitted on held-out predictions) says how much of "
+         "measured per camera count on dev.json (as is the geometry's typical yaw error, a few degrees, which is subtracted from its yaw), "
+         "and a trust factor per camera count, one for position and one for yaw (fitted on held-out predictions), says how much of "
          "the network's weight its real errors have earned. Outside the floor it was trained on, the host uses geometry. Each published person "
          "says which (`estimator`: hybrid, onnx, analytic), and the filter takes the fused sigma as its measurement noise.",
          "- `site-independent.int8.onnx` / `.fp32.onnx`: the same network on world-ray features (any camera layout, up to 4 views per person), "
@@ -123,7 +139,9 @@ def main(out_dir: Path, card: Path) -> int:
          "- Training: simulation of the site over **its whole floor** (the room the cameras see, `edge/floor.py`; before, the floor was the "
          "bounding box of one recording's path), 30,000 samples, half of the instants placing people uniformly over the floor with any heading; "
          "AdamW, one-cycle LR, early stopping on a 10% validation split. The shipped model is that network fine-tuned on 10,000 new simulated "
-         "samples plus all 225 dev.json samples (each repeated 20 times per epoch).",
+         "samples plus all 225 dev.json samples (each repeated 20 times per epoch) and every proper subset of each sample's views "
+         "(5 times per epoch: a frame three cameras saw is also three real single-view and three two-view frames, with the same truth; "
+         "real detector noise for the hard camera counts).",
          "- The simulated detector (`edge.simulator.NoiseModel`) was matched to dev.json's statistics: which joints are reported, how often, "
          "with what scores, and (`FACING_VISIBILITY`) how that depends on where the person faces: from behind the nose and eyes vanish but "
          "the ears stay, side-on the far eye, ear, elbow and wrist are hidden (`scripts/sim_vs_dataset.py` prints the comparison). "
@@ -149,9 +167,11 @@ def main(out_dir: Path, card: Path) -> int:
     L += _cv_section("Spatially blocked 5-fold cross-validation: the proxy for places the recording never walked",
                      "The file is split into 5 floor regions (k-means on the true path); each region is predicted by the simulation model fine-tuned "
                      "on the samples of the other regions, less every sample within 0.3 m of the held-out region. The hybrid's calibration for each "
-                     "fold (sigma scales, geometry sigmas, trust) is fitted on the other folds only.", hs)
+                     "fold (sigma scales, geometry sigmas and yaw bias, trust) is fitted on the other folds only.", hs)
     L += _cv_section("Time-blocked 5-fold cross-validation",
                      "The same with 5 contiguous time segments (5.6 s each) as folds.", ht)
+    L += ["", "### The shipped hybrid calibration (fitted on all of the spatial cross-validation's held-out predictions)", ""]
+    L += _calibration_table(hs)
     L += ["", "### Uncertainty calibration (spatial cross-validation)", ""]
     L += _sigma_table(hs.get("coverage") if hs else None)
     L += ["", "### Simulation only: a model that never saw real data", ""]

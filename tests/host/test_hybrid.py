@@ -30,6 +30,18 @@ def test_fuse(net, net_std, geo, geo_std, expected):
     assert np.all(std[0] <= np.minimum(net_std, geo_std) + 1e-12)  # fusing never makes it less sure
 
 
+def test_trust_moves_the_weights_not_the_claimed_accuracy():
+    net, geo = np.array([[0.0, 0.0, 0.0]]), np.array([[1.0, 1.0, 0.5]])
+    s = np.full((1, 3), 0.1)
+    pose, std = fuse(net, s, geo, s, trust=np.array([[10.0, 0.0, 1.0]]))
+    np.testing.assert_allclose(pose[0, :2], [1 / 11, 1.0])  # x: weights 10 : 1; y: geometry alone
+    # x: sd of (10 a + b) / 11 for independent a, b of sd 0.1 = 0.1 sqrt(101) / 11, above 1 / sqrt(1100)
+    np.testing.assert_allclose(std[0], [0.1 * math.sqrt(101) / 11, 0.1, 0.1 / math.sqrt(2)])
+    pose, std = fuse(net, s, geo, s * 2, trust=0.0)  # no trust: the geometry, as sure as it is
+    np.testing.assert_allclose(pose, geo)
+    np.testing.assert_allclose(std, s * 2)
+
+
 def test_fuse_empty():
     pose, std = fuse(np.zeros((0, 3)), np.ones((0, 3)), np.zeros((0, 3)), np.ones((0, 3)))
     assert pose.shape == std.shape == (0, 3)
@@ -45,6 +57,8 @@ def test_analytic_sigmas_by_camera_count_and_pair():
     dict(analytic_std=((0.1, 0.1, 0.1),)),                                     # one row, not three
     dict(analytic_std=((0.1, 0.1, 0.1), (0.1, -0.1, 0.1), (0.1, 0.1, 0.1))),   # a negative sigma
     dict(analytic_std=CAL.analytic_std, floor_margin_m=-1.0),                  # negative margin
+    dict(analytic_std=CAL.analytic_std, analytic_bias=((0, 0, 0),) * 2),         # two bias rows
+    dict(analytic_std=CAL.analytic_std, analytic_bias=((0, 0, 20), (0, 0, 0), (0, 0, 0))),  # 20 rad
 ])
 def test_calibration_rejects_bad_values(bad):
     with pytest.raises(ValueError):
@@ -53,6 +67,17 @@ def test_calibration_rejects_bad_values(bad):
 
 def test_calibration_json_round_trip():
     assert HybridCalibration.from_json(CAL.to_json()) == CAL
+    biased = HybridCalibration(analytic_std=CAL.analytic_std, analytic_bias=((0.1, 0, 0.05), (0, 0, 0.07), (0, -0.02, 3.1)))
+    assert HybridCalibration.from_json(biased.to_json()) == biased
+
+
+def test_debias_subtracts_the_bias_of_each_camera_count_and_wraps_yaw():
+    cal = HybridCalibration(analytic_std=CAL.analytic_std, analytic_bias=((0.1, 0.0, 0.1), (0.0, 0.0, 0.0), (0.0, 0.2, -0.2)))
+    geo = np.array([[1.0, 1.0, 0.0], [1.0, 1.0, 0.5], [1.0, 1.0, math.pi - 0.1], [np.nan, np.nan, np.nan]])
+    out = cal.debias(geo, np.array([1, 2, 4, 1]))
+    np.testing.assert_allclose(out[:3], [[0.9, 1.0, -0.1], [1.0, 1.0, 0.5], [1.0, 0.8, -math.pi + 0.1]], atol=1e-12)
+    assert np.isnan(out[3]).all()  # no geometry stays no geometry
+    np.testing.assert_array_equal(geo[1], [1.0, 1.0, 0.5])  # the input is not modified
 
 
 def test_support_gate_knows_the_floor():

@@ -12,7 +12,7 @@ torch = pytest.importorskip("torch")
 
 from superbody.edge.site import load_site  # noqa: E402
 from superbody.models.crossval import spatial_folds  # noqa: E402
-from superbody.models.hybrid import fit_analytic, fit_std_scale, hybrid_poses, leave_one_fold_out, robust_sigma, sigma_coverage  # noqa: E402
+from superbody.models.hybrid import TRUST_GRID, fit_analytic, fit_std_scale, fit_trust, hybrid_poses, leave_one_fold_out, robust_sigma, sigma_coverage  # noqa: E402
 from superbody.models.nets import pose_nll  # noqa: E402
 from tests.conftest import WTF_SITE  # noqa: E402
 
@@ -58,6 +58,43 @@ def test_fit_analytic_by_camera_count_and_pair():
     assert cal.analytic_yaw_std_no_pair > 1.5
 
 
+def test_fit_analytic_measures_and_removes_the_yaw_bias_but_not_the_position_bias():
+    rng = np.random.default_rng(3)
+    n = 3000
+    cams = rng.integers(1, 4, n)
+    bias = np.array([[0.2, 0.0, 0.3], [0.2, 0.0, -0.1], [0.2, 0.0, 0.07]])  # x m, y m, yaw rad per count
+    truth = np.column_stack([np.zeros((n, 2)), rng.uniform(-np.pi, np.pi, n)])
+    pred = truth + bias[cams - 1] + rng.normal(0, 0.05, (n, 3))
+    pred[:, 2] = np.angle(np.exp(1j * pred[:, 2]))
+    cal = fit_analytic(pred, np.ones(n, bool), truth, cams)
+    b = np.array(cal.analytic_bias)
+    np.testing.assert_allclose(b[:, 2], bias[:, 2], atol=0.01)
+    np.testing.assert_array_equal(b[:, :2], 0.0)  # position: measured on one part of a floor, wrong on another
+    np.testing.assert_allclose([r[2] for r in cal.analytic_std], 0.05, rtol=0.12)  # the sigma of what is left
+    fused, _, _ = hybrid_poses(np.zeros((n, 3)), np.full((n, 3), np.inf), pred, np.ones(n, bool), cams, cal, load_site(WTF_SITE))
+    err = np.abs(np.angle(np.exp(1j * (fused[:, 2] - truth[:, 2]))))
+    assert np.median(err) < 0.05  # the geometry's yaw, less its bias
+    plain = fit_analytic(pred, np.ones(n, bool), truth, cams, debias=(False, False, False))
+    assert np.array(plain.analytic_bias).tolist() == [[0.0] * 3] * 3 and plain.analytic_std[0][2] > 0.25
+
+
+def test_trust_is_earned_per_camera_count_one_for_position_one_for_yaw():
+    """One camera: the network is good, the geometry poor -> high trust. Three cameras: the
+    network's position is biased by 0.3 m, its yaw good -> position trust 0, yaw trust high."""
+    rng = np.random.default_rng(4)
+    n = 2000
+    cams = np.repeat([1, 3], n // 2)
+    truth = np.column_stack([rng.uniform(-1, 1, (n, 2)), rng.uniform(-3, 3, n)])
+    geo = truth + rng.normal(0, 1, (n, 3)) * np.where(cams[:, None] == 1, [0.4, 0.4, 0.6], [0.05, 0.05, 0.5])
+    net = truth + rng.normal(0, 0.05, (n, 3)) + np.where(cams[:, None] == 3, [0.3, -0.3, 0.0], 0.0)
+    net_std = np.full((n, 3), 0.05)
+    cal = fit_trust(net, net_std, geo, np.ones(n, bool), truth, cams, fit_analytic(geo, np.ones(n, bool), truth, cams))
+    (p1, q1, y1), (_, _, _), (p3, q3, y3) = cal.net_trust
+    assert p1 == q1 and p3 == q3  # x and y share one trust
+    assert p1 >= 1 and y1 >= 1 and y3 >= 1 and p3 == 0.0
+    assert cal.net_trust[1] == (1.0, 1.0, 1.0) and set(cal.net_trust[0]) <= set(TRUST_GRID)  # no 2-camera samples: the default
+
+
 def test_hybrid_beats_both_when_errors_are_independent():
     """Two unbiased estimates with independent errors: the fused one is better than either."""
     site = load_site(WTF_SITE)
@@ -85,7 +122,7 @@ def test_hybrid_falls_back_to_geometry_off_the_floor():
     cal = fit_analytic(np.zeros((30, 3)) + 0.01, np.ones(30, bool), np.zeros((30, 3)), np.full(30, 2))
     pose, std, source = hybrid_poses(net, np.full((2, 3), 0.1), geo, np.array([True, False]), np.array([2, 1]), cal, site)
     assert source.tolist() == ["analytic", "onnx"]
-    np.testing.assert_allclose(pose, [[0.1, 0.1, 0.1], [0.0, 0.0, 0.0]])
+    np.testing.assert_allclose(pose, [[0.1, 0.1, 0.09], [0.0, 0.0, 0.0]])  # the geometry's yaw less its measured bias (0.01)
 
 
 def test_spatial_folds_are_regions_with_a_buffer():
