@@ -22,8 +22,8 @@ test -f "$DEV" || { echo "dev.json not found at $DEV (set DEV=...)" >&2; exit 2;
 
 COMMON=(--site "$SITE" --arch gat --geometry --no-progress)
 # Fine-tuning on real data: each sample 20 times per epoch, and each proper subset of its views
-# (a 3-camera frame as three single-view and three two-view frames, same truth) 5 times.
-FINETUNE=(--real "$DEV" --real-repeat 20 --real-subset-repeat 5 --sim-samples 10000 --sim-seed 1 --epochs 8 --lr 5e-4 --patience 3)
+# (a 3-camera frame as three single-view and three two-view frames, same truth) 10 times.
+FINETUNE=(--real "$DEV" --real-repeat 20 --real-subset-repeat 10 --sim-samples 10000 --sim-seed 1 --epochs 8 --lr 5e-4 --patience 3)
 
 # A step is skipped when its output exists (delete build/models to start over).
 train() {  # NAME ARGS...
