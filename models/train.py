@@ -354,6 +354,7 @@ def add_train_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--batch-size", type=int, default=128)
     p.add_argument("--lr", type=float, default=2e-3)
     p.add_argument("--patience", type=int, default=6, help="early stopping patience, epochs")
+    p.add_argument("--yaw-weight", type=float, default=1.0, help="weight of the yaw (sin, cos) error against the position error (default 1)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--max-minutes", type=float, default=15.0, help="stop training after this long (default 15)")
     p.add_argument("--threads", type=int, default=2, help="torch threads (default 2)")
@@ -366,7 +367,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         site=args.site, arch=args.arch, variant=args.variant, use_3d=args.use_3d, max_views=args.max_views, geometry=args.geometry, hparams=args.hparams,
         sim_samples=args.sim_samples, sim_seed=args.sim_seed, random_sites=args.random_sites, real=args.real,
         real_exclude=args.real_exclude, real_repeat=args.real_repeat, real_subset_repeat=args.real_subset_repeat, epochs=args.epochs, batch_size=args.batch_size,
-        lr=args.lr, patience=args.patience, seed=args.seed, max_minutes=args.max_minutes, threads=args.threads, init=args.init,
+        lr=args.lr, patience=args.patience, yaw_weight=args.yaw_weight, seed=args.seed, max_minutes=args.max_minutes, threads=args.threads, init=args.init,
     )
 
 
