@@ -168,7 +168,6 @@ def fit_trust(net: NDArray, net_std: NDArray, analytic: NDArray, pair: NDArray, 
 
 def leave_one_fold_out(
     net: NDArray, net_std: NDArray, analytic: NDArray, pair: NDArray, truth: NDArray, cameras: NDArray, fold: NDArray, site: Site,
-    debias: tuple[bool, bool, bool] = DEBIAS,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.str_]]:
     """Hybrid poses where each fold's calibration (std scale, analytic sigmas, trust) comes from
     the other folds only: an honest figure for the hybrid on the cross-validation."""
@@ -178,7 +177,7 @@ def leave_one_fold_out(
     for k in np.unique(fold):
         test, train = fold == k, fold != k
         scale = fit_std_scale(net[train], net_std[train], truth[train], cameras[train])
-        cal = fit_analytic(analytic[train], pair[train], truth[train], cameras[train], debias=debias)
+        cal = fit_analytic(analytic[train], pair[train], truth[train], cameras[train])
         cal = fit_trust(net[train], scaled_std(net_std[train], scale, cameras[train]), analytic[train], pair[train], truth[train], cameras[train], cal)
         pose[test], std[test], source[test] = hybrid_poses(net[test], scaled_std(net_std[test], scale, cameras[test]), analytic[test],
                                                            pair[test], cameras[test], cal, site)

@@ -172,9 +172,8 @@ def _datasets(cfg: TrainConfig, site: Site, spec: GraphSpec, model, progress: bo
             drop |= set(range(*cfg.real_exclude))
         real = [s for i, s in enumerate(real) if i not in drop]
         real = [Sample(s.views, truth_to_torso(s.truth)[0], s.stamp_ns) for s in real]
-        for group, repeat in ((real, cfg.real_repeat), (view_subsets(real) if cfg.real_subset_repeat else [], cfg.real_subset_repeat)):
-            if not group:
-                continue
+        groups = [(real, cfg.real_repeat)] + ([(view_subsets(real), cfg.real_subset_repeat)] if cfg.real_subset_repeat else [])
+        for group, repeat in groups:
             x, m, y = prepare(group, site, spec, model)
             parts.append((np.repeat(x, repeat, 0), np.repeat(m, repeat, 0), np.repeat(y, repeat, 0), np.ones(len(x) * repeat, np.float32)))
     return tuple(np.concatenate([p[i] for p in parts]) for i in range(4))  # type: ignore[return-value]
