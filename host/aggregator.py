@@ -6,8 +6,10 @@ Two layers:
   tracker (frames out of order, duplicated, stale or from the future are rejected by reason:
   ``Tracker.admit``); ``camera_liveliness()`` admits only the site's own cameras, so no name
   a peer puts in a liveliness key ever reaches an encoder; ``step()`` prunes, takes each
-  confirmed person's set S (latest fresh view per camera), estimates the people whose views changed in one batched call, filters, and returns
-  the PoseArray. Bad payloads are counted by reason and dropped, never fatal.
+  confirmed person's set S (latest fresh view per camera), estimates the people whose views
+  changed in one batched call, filters (each estimate taken at the mean capture time of its
+  views, the pose predicted on to the newest view's time), and returns the PoseArray. Bad
+  payloads are counted by reason and dropped, never fatal.
 - ``run_host()``: the process around it: a Zenoh subscriber whose callback only queues the raw
   payload (heavy work stays off Zenoh's thread; a payload larger than the decoder accepts is
   counted and dropped before it is copied, and the queue is bounded in bytes as well as in
@@ -40,7 +42,7 @@ from superbody.edge.site import Site
 from superbody.host import pose as pose_msg
 from superbody.host import status as host_status
 from superbody.host.estimator import Estimator, estimate_detailed
-from superbody.host.filter import FilterConfig, PoseFilter, update_many
+from superbody.host.filter import FilterConfig, PoseFilter, predict_many, update_many
 from superbody.host.memory import release_free_memory
 from superbody.host.tracker import Tracker, TrackerConfig
 
@@ -199,7 +201,8 @@ class Aggregator:
             self._last_input.pop(tr.id, None)
             self._poses.pop(tr.id, None)
         sets = self.tracker.view_sets(now_ns, self.config.freshness_s)
-        newest = {tid: max(self.tracker.track(tid).views[c].stamp_ns for c in views) for tid, views in sets.items()}
+        stamps_of = {tid: [self.tracker.track(tid).views[c].stamp_ns for c in views] for tid, views in sets.items()}
+        newest = {tid: max(st) for tid, st in stamps_of.items()}
         todo = [tid for tid in sets if newest[tid] > self._last_input.get(tid, -1)]
         if todo:
             # Every person whose views changed since their last estimate, once, in one batched call.
@@ -213,8 +216,14 @@ class Aggregator:
             tids = [todo[i] for i in rows]
             stamps = [newest[tid] for tid in tids]
             filters = [self._filters.setdefault(tid, PoseFilter(self.config.filter)) for tid in tids]
+            # The cameras are not synchronised: set S mixes views captured up to a frame or more
+            # apart, and an estimate from them describes the person at about the mean of their
+            # capture times. The filter takes it there (never before its own state's time: it would
+            # drop it) and the pose is predicted on to the newest view's time.
+            measured = [max(int(np.mean(stamps_of[tid])), f.stamp_ns or 0) for tid, f in zip(tids, filters)]
             # The estimator's own sigma is the measurement noise: a poor single-view yaw moves a track less.
-            fps = update_many(filters, stamps, est.pose[rows], est.std[rows])
+            update_many(filters, measured, est.pose[rows], est.std[rows])
+            fps = predict_many(filters, stamps)
             self.tracker.set_positions(tids, [(fp.x, fp.y) for fp in fps], stamps)
             conf = confidences([sets[tid] for tid in tids]).tolist() if tids else []
             for i, tid, fp, c in zip(rows, tids, fps, conf):

@@ -22,7 +22,8 @@ from numpy.typing import NDArray
 
 from superbody.edge.angles import wrap_angle
 
-__all__ = ["predict", "update", "joseph_position_update", "white_accel_noise", "FilterConfig", "FilteredPose", "PoseFilter", "update_many"]
+__all__ = ["predict", "update", "joseph_position_update", "white_accel_noise", "FilterConfig", "FilteredPose", "PoseFilter", "update_many",
+           "predict_many"]
 
 _NS = 1e-9
 _AX = np.arange(3)  # state indices of x, y, yaw
@@ -251,15 +252,7 @@ class PoseFilter:
         """
         if self._t is None:
             raise RuntimeError("PoseFilter.predict_to: no measurement yet")
-        t_ns = max(int(t_ns), self._t)
-        if not self.config.enabled:
-            return self._pose(t_ns, self._x, self._P)
-        xs, P = self._predicted(t_ns)
-        return self._pose(t_ns, xs, P)
-
-    def _predicted(self, t_ns: int) -> tuple[NDArray, NDArray]:
-        x, P = _predict_many([self], np.array([t_ns]))
-        return x[0, :, 0], P[0]
+        return predict_many([self], [t_ns])[0]
 
     def _start(self, t_ns: int, x: float, y: float, yaw: float, R: NDArray) -> FilteredPose:
         c = self.config
@@ -339,6 +332,26 @@ def update_many(
         for i, fp in zip(batch, _step(fs, np.array([int(t_ns[i]) for i in batch], dtype=np.int64), pose[batch], std)):
             out[i] = fp
     return out  # type: ignore[return-value]
+
+
+def predict_many(filters: Sequence[PoseFilter], t_ns: Sequence[int]) -> list[FilteredPose]:
+    """``filters[i].predict_to(t_ns[i])`` for every i, the enabled ones in one batch.
+
+    Raises:
+        RuntimeError: a filter has no measurement yet.
+    """
+    if len(filters) != len(t_ns):
+        raise ValueError(f"predict_many: {len(filters)} filters and {len(t_ns)} stamps must match")
+    if any(f._t is None for f in filters):
+        raise RuntimeError("predict_many: a filter has no measurement yet")
+    t = [max(int(ti), f._t) for f, ti in zip(filters, t_ns)]  # type: ignore[type-var]
+    out = [f._pose(ti, f._x, f._P) for f, ti in zip(filters, t)]  # held (disabled) or already at that time
+    batch = [i for i, f in enumerate(filters) if f.config.enabled and t[i] > f._t]  # type: ignore[operator]
+    if batch:
+        x, P = _predict_many([filters[i] for i in batch], np.array([t[i] for i in batch], dtype=np.int64))
+        for k, i in enumerate(batch):
+            out[i] = filters[i]._pose(t[i], x[k, :, 0], P[k])
+    return out
 
 
 def _predict_many(filters: Sequence[PoseFilter], t_ns: NDArray) -> tuple[NDArray, NDArray]:

@@ -3,7 +3,8 @@
 ``superbody eval`` scores each sample on its own (per frame). The live system does more: the
 tracker (host.tracker) keeps people over time, the estimator sees each person's set S (the
 latest fresh view per camera, possibly from different instants) and the Kalman filter
-(host.filter) smooths the result. ``replay`` runs exactly that code, in-process, with the world
+(host.filter) smooths the result (it takes each estimate at the mean capture time of its views
+and predicts the pose on to the newest view's time). ``replay`` runs exactly that code, in-process, with the world
 clock injected:
 
 1. every view of every sample becomes an Observation encoded with ``edge.wire``, as a camera

@@ -242,3 +242,40 @@ def test_the_batched_step_is_the_textbook_six_state_filter():
         assert np.allclose([g.x, g.y, g.yaw, g.vx, g.vy, g.yaw_rate], x, atol=1e-12)
         assert np.allclose(filters[k]._P, P, atol=1e-12)
         assert np.allclose(g.cov, P[:3, :3], atol=1e-12)
+
+
+def test_predict_many_is_the_textbook_prediction_of_each_filter():
+    # predict_many (and predict_to, which uses it) against predict() with this filter's F and Q,
+    # for filters at different times; an earlier time gives the state, a disabled filter holds.
+    from superbody.host.filter import predict_many, white_accel_noise
+
+    rng = np.random.default_rng(5)
+    cfg = FilterConfig()
+    filters = [PoseFilter(cfg) for _ in range(4)] + [PoseFilter(FilterConfig(enabled=False))]
+    for f in filters:
+        for k in range(int(rng.integers(3, 12))):
+            f.update(k * S // 8 + int(rng.integers(0, S // 50)), *rng.normal(0, 1, 2), rng.uniform(-3, 3), (0.1, 0.1, 0.2))
+    states = [(f.stamp_ns, f._x.copy(), f._P.copy()) for f in filters]
+    want_t = [filters[0].stamp_ns + S // 3, filters[1].stamp_ns + 1, filters[2].stamp_ns - S, filters[3].stamp_ns, filters[4].stamp_ns + S]
+    got = predict_many(filters, want_t)
+    for i, (f, g) in enumerate(zip(filters, got)):
+        t0, x0, P0 = states[i]
+        assert (f.stamp_ns, f._x.tolist()) == (t0, x0.tolist())  # prediction leaves the state alone
+        if i == 4:  # disabled: the last measurement, held, at the asked time
+            assert g.stamp_ns == want_t[i] and (g.x, g.y, g.yaw) == (x0[0], x0[1], x0[2])
+            continue
+        dt = max(0, want_t[i] - t0) / S
+        F = np.eye(6)
+        F[[0, 1, 2], [3, 4, 5]] = dt
+        Q = np.zeros((6, 6))
+        for ax, sig in enumerate((cfg.accel_std_mps2, cfg.accel_std_mps2, cfg.yaw_accel_std_radps2)):
+            Q[ax::3, ax::3] = white_accel_noise(dt, sig)
+        x, P = predict(x0, P0, F, Q)
+        assert g.stamp_ns == max(want_t[i], t0)
+        assert np.allclose([g.x, g.y, g.vx, g.vy, g.yaw_rate], [x[0], x[1], x[3], x[4], x[5]], atol=1e-12)
+        assert abs(wrap_angle(g.yaw - x[2])) < 1e-12 and np.allclose(g.cov, P[:3, :3], atol=1e-12)
+        assert f.predict_to(want_t[i]).x == g.x
+    with pytest.raises(RuntimeError, match="no measurement"):
+        predict_many([filters[0], PoseFilter()], [0, 0])
+    with pytest.raises(ValueError, match="must match"):
+        predict_many(filters, [0])
