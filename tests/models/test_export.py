@@ -155,6 +155,7 @@ def test_int8_stays_close_to_fp32(arch, tmp_path):
     assert {k: meta[k] for k in meta32} == meta32  # every fp32 key kept
     assert meta["quant.calibration_batches"] == "4" and meta["quant.calibration_graphs"] == "128"
     assert json.loads(meta["quant.keep_fp32"]) == list(KEEP_FP32[arch])
+    assert int(meta["quant.fp32_nodes"]) > 0 and int(meta["quant.int8_nodes"]) > 0  # the fragments match this export's names
     drift = json.loads(meta["quant.drift"])
     assert drift["graphs"] == 128 and drift["pos_mean_m"] <= drift["pos_max_m"] < INT8_POS_MAX
     test = build_batch(people(256, seed=100), SITE, spec)  # unseen graphs
