@@ -29,9 +29,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _add_train(sub: argparse._SubParsersAction) -> None:
-    from superbody.models import coverage, crossval, train  # light: torch is imported only when a run starts
+    from superbody.models import coverage, crossval, ensemble, train  # light: torch is imported only when a run starts
 
     train.register(sub)
+    ensemble.register(sub)
     crossval.register(sub)
     coverage.register(sub)
 
@@ -72,7 +73,9 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
             "others), and write the calibration into each --model (metadata pose.std_scale, hybrid.calibration)."
         ),
     )
-    h.add_argument("--cv", type=Path, required=True, metavar="CV.npz", help="held-out predictions from superbody crossval --predictions-out")
+    h.add_argument("--cv", type=Path, action="append", required=True, metavar="CV.npz",
+                   help="held-out predictions from superbody crossval --predictions-out; repeat it for an ensemble's members "
+                        "(same file, folds and split; combined as the ensemble model does, models/ensemble.py)")
     h.add_argument("--dataset", type=Path, required=True, metavar="PATH.json", help="the WheresTheFellow file the cross-validation used")
     h.add_argument("--site", type=Path, default=site_path("wtf-apartment"), metavar="SITE.toml", help="site file (default: the shipped wtf-apartment)")
     h.add_argument("--model", type=Path, action="append", default=[], metavar="M.onnx", help="model to write the calibration into (repeatable)")
@@ -174,15 +177,29 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
     try:
         site = load_site(args.site)
         samples = load_wtf(args.dataset, site=site)
-        cv = np.load(args.cv)
-        net, std, fold = cv["predictions"], cv["std"], cv["fold"]
-        offset = float(cv["truth_offset_m"])
     except (DatasetError, SiteError) as e:
         return _fail(command, str(e))
-    except (OSError, ValueError, KeyError) as e:
-        return _fail(command, f"--cv {args.cv}: not a crossval predictions file ({e})")
-    if len(net) != len(samples):
-        return _fail(command, f"--cv {args.cv} has {len(net)} predictions, --dataset {args.dataset} has {len(samples)} samples")
+    members = []
+    for path in args.cv:
+        try:
+            with np.load(path) as cv:
+                members.append({k: cv[k] for k in ("predictions", "std", "fold", "truth", "truth_offset_m")})
+        except (OSError, ValueError, KeyError) as e:
+            return _fail(command, f"--cv {path}: not a crossval predictions file ({e})")
+        if len(members[-1]["predictions"]) != len(samples):
+            return _fail(command, f"--cv {path} has {len(members[-1]['predictions'])} predictions, --dataset {args.dataset} has {len(samples)} samples")
+        first = members[0]
+        if not (np.array_equal(members[-1]["fold"], first["fold"]) and np.allclose(members[-1]["truth"], first["truth"])
+                and float(members[-1]["truth_offset_m"]) == float(first["truth_offset_m"])):
+            return _fail(command, f"--cv {path}: other folds, samples or truth offset than --cv {args.cv[0]} (an ensemble's members "
+                                  "must be cross-validated on the same split)")
+    fold, offset = members[0]["fold"], float(members[0]["truth_offset_m"])
+    if len(members) == 1:
+        net, std = members[0]["predictions"], members[0]["std"]
+    else:
+        from superbody.models.ensemble import combine
+
+        net, std = combine(np.stack([m["predictions"] for m in members]), np.stack([m["std"] for m in members]))
     for m in args.model:
         if not m.is_file():
             return _fail(command, f"--model {m}: no such file")
@@ -191,7 +208,7 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
     analytic, pair = hybrid.analytic_with_pairs(samples, site)
     try:
         scale = hybrid.fit_std_scale(net, std, truth, cams)
-        cal = hybrid.fit_analytic(analytic, pair, truth, cams, source=f"{args.dataset.name}, {len(samples)} samples; network sigmas from {args.cv.name}")
+        cal = hybrid.fit_analytic(analytic, pair, truth, cams, source=f"{args.dataset.name}, {len(samples)} samples; network sigmas from {' + '.join(p.name for p in args.cv)}")
         cal = hybrid.fit_trust(net, hybrid.scaled_std(std, scale, cams), analytic, pair, truth, cams, cal)
         lofo, lofo_std, source = hybrid.leave_one_fold_out(net, std, analytic, pair, truth, cams, fold, site)
     except ValueError as e:

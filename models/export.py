@@ -16,7 +16,8 @@ yaw = atan2(sin, cos).
 
 Metadata (``metadata_props``, all strings): the GraphSpec (``graph.*``), ``pose.frame``,
 ``pose.scale``, ``pose.origin`` (JSON [x, y]), ``model.config`` (JSON: arch, hyper-parameters,
-normalisation), ``train.config`` (JSON: the training run's config), and for int8 models
+normalisation), ``train.config`` (JSON: the training run's config), ``ensemble.members`` for
+an ensemble (several networks combined in the graph, ``models.ensemble``), and for int8 models
 ``quant.*`` (format, node-name fragments kept in fp32 and how many products they kept and
 quantised, calibration size, source file, and ``quant.drift``:
 how far the int8 poses are from the fp32 ones on the calibration graphs).
@@ -56,9 +57,11 @@ from superbody.models.nets import GAT, PoseNet, build_model
 
 # How the network was written out: "fast_gat" (models.fast_gat) or "dense" (the training graph).
 META_EXPORT_FORMULATION = "export.formulation"
+# How many networks an ensemble model combines (absent: one).
+META_ENSEMBLE = "ensemble.members"
 
 __all__ = ["export_onnx", "quantize_int8", "read_metadata", "load_onnx_model", "reexport", "GraphBatchReader", "QUANTIZED_OPS", "KEEP_FP32",
-           "META_EXPORT_FORMULATION"]
+           "META_EXPORT_FORMULATION", "META_ENSEMBLE"]
 
 # Only the products are quantised: they hold the arithmetic. Quantising every op (softmax,
 # the -1e9 attention mask, residual adds) wrecked a trained GAT (position error x9).
@@ -104,6 +107,27 @@ class _ExportedPose(nn.Module):
         return pose, std
 
 
+class _ExportedEnsemble(nn.Module):
+    """Several ``_ExportedPose`` as one: the members' poses and sigmas combined as
+    ``models.ensemble.combine`` does (mean position, circular-mean yaw as a unit (sin, cos), the
+    sigma of the members' equal mixture)."""
+
+    def __init__(self, members: Sequence[_ExportedPose]):
+        super().__init__()
+        self.members = nn.ModuleList(members)
+
+    def forward(self, x: torch.Tensor, adj: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        outs = [m(x, adj, mask) for m in self.members]
+        pose = torch.stack([o[0] for o in outs])  # (K, B, 4)
+        std = torch.stack([o[1] for o in outs])  # (K, B, 3)
+        u = pose[..., 2:4] / pose[..., 2:4].norm(dim=-1, keepdim=True).clamp_min(1e-9)  # (K, B, 2) unit (sin, cos)
+        mean_u = u.mean(0)  # (B, 2)
+        unit = mean_u / mean_u.norm(dim=-1, keepdim=True).clamp_min(1e-9)
+        xy = pose[..., :2].mean(0)  # (B, 2)
+        spread = torch.cat([(pose[..., :2] - xy) ** 2, ((u - unit) ** 2).sum(-1, keepdim=True)], dim=-1)  # (K, B, 3)
+        return torch.cat([xy, mean_u], dim=-1), torch.sqrt((std**2).mean(0) + spread.mean(0))
+
+
 def _metadata(model: PoseNet, spec: GraphSpec, config: Mapping) -> dict[str, str]:
     meta = dict(spec.to_metadata())
     site_model = spec.variant == "site"
@@ -142,11 +166,13 @@ def _declare_all_inputs(proto: onnx.ModelProto, spec: GraphSpec) -> None:
     proto.graph.input.extend(inputs)
 
 
-def export_onnx(model: PoseNet, spec: GraphSpec, config: Mapping, path: str | Path, opset: int = 17, fast: bool = True) -> Path:
+def export_onnx(model: PoseNet | Sequence[PoseNet], spec: GraphSpec, config: Mapping, path: str | Path, opset: int = 17, fast: bool = True) -> Path:
     """Write the model as fp32 ONNX with a dynamic batch axis and its metadata.
 
     Args:
-        model: a network from ``models.nets.build_model``.
+        model: a network from ``models.nets.build_model``, or several alike (same spec, scale
+            and origin): an ensemble, combined inside the graph as ``models.ensemble.combine``
+            does (metadata ``ensemble.members``: how many).
         spec: the graph spec it was built for (must equal ``model.spec``).
         config: the training config to store (JSON-able; other values are stored as str()).
         path: the .onnx file to write.
@@ -159,13 +185,21 @@ def export_onnx(model: PoseNet, spec: GraphSpec, config: Mapping, path: str | Pa
     Returns:
         The path written.
     """
-    if model.spec != spec:
-        raise ValueError(f"export_onnx: the model was built for {model.spec}, not {spec}")
+    models = [model] if isinstance(model, PoseNet) else list(model)
+    if not models:
+        raise ValueError("export_onnx: no model given")
+    for m in models:
+        if m.spec != spec:
+            raise ValueError(f"export_onnx: the model was built for {m.spec}, not {spec}")
+        if (m.arch, m.scale, tuple(m.origin)) != (models[0].arch, models[0].scale, tuple(models[0].origin)):
+            raise ValueError("export_onnx: an ensemble's members must share arch, output scale and origin")
+    model = models[0]
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    was_training = model.training
-    wrapper = _ExportedPose(model, fast=fast).eval()
-    formulation = "fast_gat" if isinstance(wrapper.body, FastGAT) else "dense"
+    was_training = [m.training for m in models]
+    members = [_ExportedPose(m, fast=fast).eval() for m in models]
+    wrapper = members[0] if len(members) == 1 else _ExportedEnsemble(members).eval()
+    formulation = "fast_gat" if isinstance(members[0].body, FastGAT) else "dense"
     B = 2  # any size: the batch axis is exported as dynamic
     example = (
         torch.rand(B, spec.num_nodes, spec.num_features),
@@ -184,13 +218,17 @@ def export_onnx(model: PoseNet, spec: GraphSpec, config: Mapping, path: str | Pa
                 do_constant_folding=True,
             )
     finally:
-        model.train(was_training)
+        for m, t in zip(models, was_training):
+            m.train(t)
     proto = onnx.load(str(path))
     _declare_all_inputs(proto, spec)
     proto.producer_name = "superbody"
     proto.doc_string = (f"superbody {model.arch} pose network; output pose (batch, 4) = x, y (m, frame: metadata pose.frame), "
                         "sin yaw, cos yaw; pose_std (batch, 3) = predicted 1-sigma of x, y (m) and yaw (rad)")
     meta = _metadata(model, spec, config)
+    if len(models) > 1:
+        proto.doc_string += f"; an ensemble of {len(models)} networks (models.ensemble)"
+        meta[META_ENSEMBLE] = str(len(models))
     meta[META_EXPORT_FORMULATION] = formulation
     meta[META_READS_ADJ] = "false" if formulation == "fast_gat" or model.arch == "mlp" else "true"
     _set_metadata(proto, meta)
@@ -316,6 +354,8 @@ def load_onnx_model(path: str | Path, check_batch: GraphBatch | None = None) -> 
     proto = onnx.load(str(path))
     meta = {p.key: p.value for p in proto.metadata_props}
     spec = GraphSpec.from_metadata(meta)
+    if META_ENSEMBLE in meta:
+        raise ValueError(f"{path}: an ensemble of {meta[META_ENSEMBLE]} networks; export its members' checkpoints again instead")
     cfg = json.loads(meta.get(META_MODEL_CONFIG, "{}"))
     arch = cfg.pop("arch", None)
     if arch is None:
