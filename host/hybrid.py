@@ -12,7 +12,7 @@ subtracted from its yaw first). Then:
    analytic one: label ``"analytic"``.
 2. **Fusion.** Otherwise each of x, y and yaw is the weighted mean of the two (yaw as a
    weighted mean of unit vectors) with weights t/s_net^2 and 1/s_geo^2, where the trust t per
-   camera count, one for position and one for yaw, was fitted on held-out real data (a network
+   camera count and per axis was fitted on held-out real data (a network
    whose real errors are biased deserves less weight than its sigma says; 0 leaves it to
    geometry), and sigma is that of this mean of two independent estimates ((1/s_net^2 +
    1/s_geo^2)^-1/2 at t = 1): label ``"hybrid"``. Where the geometry found nothing, the network's pose:
