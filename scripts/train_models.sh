@@ -1,16 +1,20 @@
 #!/usr/bin/env bash
 # Reproduces the shipped models and models/MODEL_CARD.md from scratch (`make models`):
-#   1. simulation only: GAT with geometry features and the uncertainty head, trained over the
-#      whole apartment floor (the room the cameras see), and the site-independent model
-#      (rays + geometry, random rooms only, never this layout), in parallel;
-#   2. blocked 5-fold cross-validation of sim + real fine-tuning on dev.json, twice: by time
-#      segments and by floor regions (the proxy for a recording that walks elsewhere);
-#   3. the shipped model: the simulation model fine-tuned on sim + all of dev.json;
+#   1. simulation only: two GATs with geometry features and the uncertainty head, trained over
+#      the whole apartment floor (the room the cameras see) from different simulated data and
+#      seeds, and the site-independent model (rays + geometry, random rooms only, never this
+#      layout), in parallel;
+#   2. the shipped model is an ensemble of three fine-tunings on sim + all of dev.json
+#      (models/ensemble.py): two from the first simulation model, one from the second, each on
+#      its own simulated data. Each member is also cross-validated, blocked 5-fold on dev.json,
+#      by time segments and by floor regions (the proxy for a recording that walks elsewhere);
+#   3. the members combined into one ONNX model (superbody ensemble);
 #   4. the hybrid calibration (network sigma scale, analytic sigma per camera count) from the
-#      spatial cross-validation, written into the shipped models;
+#      members' spatial cross-validations combined as the ensemble combines them, written into
+#      the shipped models;
 #   5. evaluation on dev.json (per frame and temporal, through the host's aggregator), the
 #      coverage maps, the demo on simulation, the inference benchmark, and the card.
-# About 75 minutes on 2 cores. Outputs in build/models; the shipped files are copied to models/.
+# About 2 hours on 2 cores. Outputs in build/models; the shipped files are copied to models/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 DEV=${DEV:-../shared/datasets/wheresthefellow/dev.json}
@@ -22,8 +26,9 @@ test -f "$DEV" || { echo "dev.json not found at $DEV (set DEV=...)" >&2; exit 2;
 
 COMMON=(--site "$SITE" --arch gat --geometry --no-progress)
 # Fine-tuning on real data: each sample 20 times per epoch, and each proper subset of its views
-# (a 3-camera frame as three single-view and three two-view frames, same truth) 10 times.
-FINETUNE=(--real "$DEV" --real-repeat 20 --real-subset-repeat 10 --sim-samples 10000 --sim-seed 1 --epochs 8 --lr 5e-4 --patience 3)
+# (a 3-camera frame as three single-view and three two-view frames, same truth) 10 times; each
+# member adds its own --sim-seed (its 10,000 simulated samples) and --init.
+FINETUNE=(--real "$DEV" --real-repeat 20 --real-subset-repeat 10 --sim-samples 10000 --epochs 8 --lr 5e-4 --patience 3)
 
 # A step is skipped when its output exists (delete build/models to start over).
 train() {  # NAME ARGS...
@@ -32,15 +37,18 @@ train() {  # NAME ARGS...
   $SB train "$@" --out "$OUT" --name "$name" > "$OUT/$name.log" 2>&1 || { tail -n 20 "$OUT/$name.log" >&2; return 1; }
   tail -n 6 "$OUT/$name.log"
 }
-crossval() {  # SPLIT
-  local split=$1
-  if [ -f "$OUT/crossval-$split.npz" ]; then echo "reusing $OUT/crossval-$split.*"; return; fi
-  $SB crossval "${COMMON[@]}" "${FINETUNE[@]}" --init "$OUT/wtf-sim.pt" --folds 5 --split "$split" --threads 1 \
-      --json-out "$OUT/crossval-$split.json" --predictions-out "$OUT/crossval-$split.npz" 2> "$OUT/crossval-$split.log" | tee "$OUT/crossval-$split.txt"
+crossval() {  # SPLIT MEMBER INIT SIM_SEED
+  local split=$1 member=$2 init=$3 seed=$4
+  if [ -f "$OUT/crossval-$split-$member.npz" ]; then echo "reusing $OUT/crossval-$split-$member.*"; return; fi
+  $SB crossval "${COMMON[@]}" "${FINETUNE[@]}" --sim-seed "$seed" --init "$init" --folds 5 --split "$split" --threads 1 \
+      --json-out "$OUT/crossval-$split-$member.json" --predictions-out "$OUT/crossval-$split-$member.npz" \
+      2> "$OUT/crossval-$split-$member.log" > "$OUT/crossval-$split-$member.txt"
+  echo "crossval $split $member done"
 }
 
-# 1. Simulation only, one thread each.
+# 1. Simulation only, one thread each (three runs on two cores).
 train wtf-sim "${COMMON[@]}" --sim-samples 30000 --epochs 30 --threads 1 --max-minutes 40 &
+train wtf-sim-b "${COMMON[@]}" --sim-samples 30000 --sim-seed 5 --seed 1 --epochs 30 --threads 1 --max-minutes 40 &
 train site-independent --site "$SITE" --arch gat --variant rays --geometry --max-views 4 --random-sites 60 \
     --sim-samples 30000 --epochs 30 --threads 1 --max-minutes 40 --no-progress &
 wait
@@ -50,16 +58,26 @@ $SB eval --dataset "$DEV" --site "$SITE" --model "$OUT/wtf-sim.fp32.onnx" --mode
 $SB eval --dataset "$DEV" --site "$SITE" --model "$OUT/site-independent.fp32.onnx" --model "$OUT/site-independent.int8.onnx" \
     --temporal --json-out "$OUT/eval-site-independent.json" | tee "$OUT/eval-site-independent.txt"
 
-# 2 and 3: the two cross-validations and the shipped fine-tuning, in parallel.
-crossval time &
-crossval space &
-train wtf-apartment "${COMMON[@]}" "${FINETUNE[@]}" --init "$OUT/wtf-sim.pt" --threads 1 &
+# 2. The ensemble's members (NAME INIT SIM_SEED): each cross-validated twice and fine-tuned on all
+# of dev.json; two queues, one per core.
+MEMBERS=("m1 $OUT/wtf-sim.pt 1" "m2 $OUT/wtf-sim.pt 2" "m3 $OUT/wtf-sim-b.pt 3")
+finetune() {  # MEMBER INIT SIM_SEED
+  train "wtf-apartment-$1" "${COMMON[@]}" "${FINETUNE[@]}" --sim-seed "$3" --init "$2" --threads 1
+}
+(for m in "${MEMBERS[@]}"; do crossval space $m; done; finetune ${MEMBERS[2]}) &
+(for m in "${MEMBERS[@]}"; do crossval time $m; done; finetune ${MEMBERS[0]}; finetune ${MEMBERS[1]}) &
 wait
 
-# 4. The hybrid calibration from the spatial cross-validation, into the shipped pair.
-$SB calibrate hybrid --cv "$OUT/crossval-space.npz" --dataset "$DEV" --site "$SITE" \
-    --model "$OUT/wtf-apartment.fp32.onnx" --model "$OUT/wtf-apartment.int8.onnx" --json-out "$OUT/hybrid-space.json" | tee "$OUT/hybrid-space.txt"
-$SB calibrate hybrid --cv "$OUT/crossval-time.npz" --dataset "$DEV" --site "$SITE" --json-out "$OUT/hybrid-time.json" | tee "$OUT/hybrid-time.txt"
+# 3. The members as one model.
+$SB ensemble --member "$OUT/wtf-apartment-m1.pt" --member "$OUT/wtf-apartment-m2.pt" --member "$OUT/wtf-apartment-m3.pt" \
+    --out "$OUT" --name wtf-apartment
+
+# 4. The hybrid calibration from the members' spatial cross-validations, into the shipped pair.
+$SB calibrate hybrid --cv "$OUT/crossval-space-m1.npz" --cv "$OUT/crossval-space-m2.npz" --cv "$OUT/crossval-space-m3.npz" \
+    --dataset "$DEV" --site "$SITE" --model "$OUT/wtf-apartment.fp32.onnx" --model "$OUT/wtf-apartment.int8.onnx" \
+    --json-out "$OUT/hybrid-space.json" | tee "$OUT/hybrid-space.txt"
+$SB calibrate hybrid --cv "$OUT/crossval-time-m1.npz" --cv "$OUT/crossval-time-m2.npz" --cv "$OUT/crossval-time-m3.npz" \
+    --dataset "$DEV" --site "$SITE" --json-out "$OUT/hybrid-time.json" | tee "$OUT/hybrid-time.txt"
 cp "$OUT/wtf-apartment.fp32.onnx" "$OUT/wtf-apartment.int8.onnx" "$OUT/site-independent.fp32.onnx" "$OUT/site-independent.int8.onnx" models/
 
 # 5. The shipped model on dev.json (its own fine-tuning data: optimistic), per frame and temporal.
