@@ -220,7 +220,7 @@ class Aggregator:
             # apart, and an estimate from them describes the person at about the mean of their
             # capture times. The filter takes it there (never before its own state's time: it would
             # drop it) and the pose is predicted on to the newest view's time.
-            measured = [max(int(np.mean(stamps_of[tid])), f.stamp_ns or 0) for tid, f in zip(tids, filters)]
+            measured = [max(sum(stamps_of[tid]) // len(stamps_of[tid]), f.stamp_ns or 0) for tid, f in zip(tids, filters)]
             # The estimator's own sigma is the measurement noise: a poor single-view yaw moves a track less.
             update_many(filters, measured, est.pose[rows], est.std[rows])
             fps = predict_many(filters, stamps)

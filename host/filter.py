@@ -345,13 +345,14 @@ def predict_many(filters: Sequence[PoseFilter], t_ns: Sequence[int]) -> list[Fil
     if any(f._t is None for f in filters):
         raise RuntimeError("predict_many: a filter has no measurement yet")
     t = [max(int(ti), f._t) for f, ti in zip(filters, t_ns)]  # type: ignore[type-var]
-    out = [f._pose(ti, f._x, f._P) for f, ti in zip(filters, t)]  # held (disabled) or already at that time
     batch = [i for i, f in enumerate(filters) if f.config.enabled and t[i] > f._t]  # type: ignore[operator]
+    out: list[FilteredPose | None] = [None] * len(filters)
     if batch:
         x, P = _predict_many([filters[i] for i in batch], np.array([t[i] for i in batch], dtype=np.int64))
         for k, i in enumerate(batch):
             out[i] = filters[i]._pose(t[i], x[k, :, 0], P[k])
-    return out
+    # The rest are held (disabled) or already at that time.
+    return [p if p is not None else f._pose(ti, f._x, f._P) for p, f, ti in zip(out, filters, t)]
 
 
 def _predict_many(filters: Sequence[PoseFilter], t_ns: NDArray) -> tuple[NDArray, NDArray]:

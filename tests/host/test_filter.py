@@ -172,6 +172,18 @@ def test_measurement_std_weights_the_update():
     assert a.x > 0.9 and b.x < a.x
 
 
+def _textbook_FQ(dt: float, c: FilterConfig) -> tuple[np.ndarray, np.ndarray]:
+    """This filter's F and Q over dt seconds, built the textbook way (the reference for the batched code)."""
+    from superbody.host.filter import white_accel_noise
+
+    F = np.eye(6)
+    F[[0, 1, 2], [3, 4, 5]] = dt
+    Q = np.zeros((6, 6))
+    for i, sa in enumerate((c.accel_std_mps2, c.accel_std_mps2, c.yaw_accel_std_radps2)):
+        Q[i::3, i::3] = white_accel_noise(dt, sa)
+    return F, Q
+
+
 def test_update_many_equals_one_update_per_filter():
     # Several people over time, with every path update_many must route right: the first
     # measurement, the batched predict + update, a late one (ignored), a gap (reset), own sigmas
@@ -210,7 +222,7 @@ def test_update_many_rejects_bad_input_like_update():
 def test_the_batched_step_is_the_textbook_six_state_filter():
     # _step writes the filter out per axis; here the same step with predict() and update() on
     # the full 6 x 6 matrices, for filters in mid-track (rates, cross terms within each axis).
-    from superbody.host.filter import _step, predict, update, white_accel_noise
+    from superbody.host.filter import _step, predict, update
     from superbody.edge.angles import wrap_angle
 
     rng = np.random.default_rng(5)
@@ -227,13 +239,7 @@ def test_the_batched_step_is_the_textbook_six_state_filter():
     H = np.hstack([np.eye(3), np.zeros((3, 3))])
     for k, (t0, x0, P0) in enumerate(before):
         c = filters[k].config
-        dt = (t[k] - t0) * 1e-9
-        F = np.eye(6)
-        F[[0, 1, 2], [3, 4, 5]] = dt
-        Q = np.zeros((6, 6))
-        for i, sa in enumerate((c.accel_std_mps2, c.accel_std_mps2, c.yaw_accel_std_radps2)):
-            Q[i::3, i::3] = white_accel_noise(dt, sa)
-        x, P = predict(x0, P0, F, Q)
+        x, P = predict(x0, P0, *_textbook_FQ((t[k] - t0) * 1e-9, c))
         x[2] = wrap_angle(x[2])
         z = np.array([pose[k, 0], pose[k, 1], x[2] + wrap_angle(wrap_angle(pose[k, 2]) - x[2])])
         x, P = update(x, P, z, H, np.diag(std[k] ** 2))
@@ -247,7 +253,7 @@ def test_the_batched_step_is_the_textbook_six_state_filter():
 def test_predict_many_is_the_textbook_prediction_of_each_filter():
     # predict_many (and predict_to, which uses it) against predict() with this filter's F and Q,
     # for filters at different times; an earlier time gives the state, a disabled filter holds.
-    from superbody.host.filter import predict_many, white_accel_noise
+    from superbody.host.filter import predict_many
 
     rng = np.random.default_rng(5)
     cfg = FilterConfig()
@@ -264,13 +270,7 @@ def test_predict_many_is_the_textbook_prediction_of_each_filter():
         if i == 4:  # disabled: the last measurement, held, at the asked time
             assert g.stamp_ns == want_t[i] and (g.x, g.y, g.yaw) == (x0[0], x0[1], x0[2])
             continue
-        dt = max(0, want_t[i] - t0) / S
-        F = np.eye(6)
-        F[[0, 1, 2], [3, 4, 5]] = dt
-        Q = np.zeros((6, 6))
-        for ax, sig in enumerate((cfg.accel_std_mps2, cfg.accel_std_mps2, cfg.yaw_accel_std_radps2)):
-            Q[ax::3, ax::3] = white_accel_noise(dt, sig)
-        x, P = predict(x0, P0, F, Q)
+        x, P = predict(x0, P0, *_textbook_FQ(max(0, want_t[i] - t0) / S, cfg))
         assert g.stamp_ns == max(want_t[i], t0)
         assert np.allclose([g.x, g.y, g.vx, g.vy, g.yaw_rate], [x[0], x[1], x[3], x[4], x[5]], atol=1e-12)
         assert abs(wrap_angle(g.yaw - x[2])) < 1e-12 and np.allclose(g.cov, P[:3, :3], atol=1e-12)
