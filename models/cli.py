@@ -354,6 +354,12 @@ def _add_eval(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--temporal-at", choices=_TEMPORAL_AT, default="first",
                    help="with --temporal, score each sample when its first view (its time) or its last view is in (default: %(default)s)")
+    p.add_argument(
+        "--latency-scan", action="store_true",
+        help=("also score each estimator's per-frame poses against the truth taken L ms before the views' mean capture time, "
+              "L from -100 to 400 ms: the lag that fits best is how much older the images are than their stamps, on the "
+              "truth's clock (each view carries its own truth)"),
+    )
     p.add_argument("--site", type=Path, default=site_path(_DEFAULT_SITE), metavar="SITE.toml", help=f"site file (default: the shipped {_DEFAULT_SITE})")
     p.add_argument("--json-out", type=Path, metavar="F", help="write the first model's metrics, the baseline's and the per-camera breakdown as JSON")
     p.add_argument("--predictions-out", type=Path, metavar="F.csv",
@@ -437,6 +443,14 @@ def _run_eval(args: argparse.Namespace) -> int:
             return _fail(command, str(e))
     else:
         print(format_table(reports, args.truth_offset))
+    scans = None
+    if args.latency_scan:
+        from superbody.models.temporal import format_latency_scan, latency_scan, truth_track, view_stamps
+
+        track, stamps = truth_track(raw), view_stamps(raw)
+        scans = {name: latency_scan(pred, stamps, track, args.truth_offset) for name, pred in predictions.items()}
+        for name, scan in scans.items():
+            print(format_latency_scan(name, scan))
     try:
         if args.json_out is not None:
             shown = names + [n for n in estimators if n.endswith(" (network)")]
@@ -445,6 +459,8 @@ def _run_eval(args: argparse.Namespace) -> int:
             if temporal is not None:
                 doc["temporal"] = dict(json_report(temporal[0], shown, _BASELINE, args.truth_offset), at=args.temporal_at,
                                        replay=temporal[1], signature=_SIGNATURE_NOTE)
+            if scans is not None:
+                doc["latency_scan"] = scans
             args.json_out.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
             print(f"wrote {args.json_out}")
         if args.predictions_out is not None:

@@ -79,6 +79,11 @@ __all__ = [
     "replay_summary",
     "format_replay",
     "simulated_recording",
+    "LATENCY_SCAN_MS",
+    "truth_track",
+    "truth_at",
+    "latency_scan",
+    "format_latency_scan",
 ]
 
 Source = Literal["track", "nearest", "per_frame"]
@@ -314,6 +319,113 @@ def jitter(pred: NDArray, truth: NDArray, truth_offset_m: float = 0.0, mask: NDA
         "yaw_deg": float(np.sqrt(np.mean(np.square(d_yaw)))),
         "pairs": int(pair.sum()),
     }
+
+
+# --- the truth's clock ---------------------------------------------------------------------------
+
+# Lags scanned by ``latency_scan``, milliseconds: the truth taken this long before the views' capture time.
+LATENCY_SCAN_MS: Final[tuple[int, ...]] = tuple(range(-100, 401, 25))
+
+
+def truth_track(raw: Sequence[RawSample]) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """The recording's ground truth as a time series: every view's own truth at its own stamp.
+
+    Each view of a WheresTheFellow sample carries the chest tracker's pose at that view's
+    capture time, so the views of one sample carry different truths when they were captured
+    apart (the sample's truth is its first view's, ``RawSample.truth``).
+
+    Returns:
+        ``(t_ns, truth)``: (M,) increasing UNIX ns, one per distinct stamp (the first view seen
+        wins a repeated stamp), and (M, 3) (x, y, yaw) with yaw unwrapped along time.
+    """
+    by_stamp: dict[int, NDArray] = {}
+    for s in raw:
+        for v in s.views:
+            by_stamp.setdefault(int(v.stamp_ms) * _NS_PER_MS, v.truth)
+    if not by_stamp:
+        raise ValueError("truth_track: the recording has no views")
+    t_ns = np.array(sorted(by_stamp), dtype=np.int64)
+    truth = np.array([by_stamp[int(t)] for t in t_ns], dtype=np.float64).reshape(-1, 3)
+    truth[:, 2] = np.unwrap(truth[:, 2])
+    return t_ns, truth
+
+
+def truth_at(track: tuple[NDArray, NDArray], t_ns: NDArray) -> NDArray[np.float64]:
+    """The truth (K, 3) at times ``t_ns`` (K,): linear between the track's stamps, held beyond its ends; yaw wrapped."""
+    t_track, truth = track
+    t = np.asarray(t_ns, dtype=np.float64).reshape(-1)
+    ref = np.asarray(t_track, dtype=np.float64)
+    out = np.stack([np.interp(t, ref, truth[:, k]) for k in range(3)], axis=1)
+    out[:, 2] = wrap_angle(out[:, 2])
+    return out
+
+
+def latency_scan(
+    pred: NDArray,
+    stamps: Sequence[Mapping[str, int]],
+    track: tuple[NDArray, NDArray],
+    truth_offset_m: float,
+    lags_ms: Sequence[int] = LATENCY_SCAN_MS,
+) -> dict:
+    """How well per-frame estimates match the truth taken ``lag`` before their views' mean capture time.
+
+    An estimate describes the person when its images were taken. If the error is least at a lag
+    L > 0, the images show the person about L earlier than their stamps say, on the truth's
+    clock: capture latency, or an offset between the cameras' and the tracker's clocks. No live
+    system can publish at time t what its cameras only show later, so such a lag bounds what a
+    temporal score at the samples' stamps can reach (``replay``).
+
+    Args:
+        pred: (N, 3) per-frame torso poses (x, y, yaw) of the samples.
+        stamps: per sample, camera id -> capture time of its view, UNIX ns (``view_stamps``).
+        track: the truth as a time series (``truth_track``).
+        truth_offset_m: how far in front of the torso the truth is (``models.wtf.TRUTH_OFFSET_M``).
+        lags_ms: the lags to try, milliseconds.
+
+    Returns:
+        ``{"lags_ms": [...], "buckets": {key: {"samples", "position_mm": [...], "yaw_deg": [...],
+        "best_position_ms", "best_yaw_ms"}}}``: MAE per lag (euclidean position, yaw), for
+        ``"all"`` samples and by the number of cameras that saw them (``"1"``, ``"2"``, ...);
+        rows with a non-finite estimate are left out.
+    """
+    pred = np.asarray(pred, dtype=np.float64).reshape(-1, 3)
+    if len(pred) != len(stamps):
+        raise ValueError(f"latency_scan: {len(pred)} predictions for {len(stamps)} samples")
+    lags = [int(v) for v in lags_ms]
+    if not lags:
+        raise ValueError("latency_scan: no lags to try")
+    ok = np.isfinite(pred).all(axis=1)
+    mean_t = np.array([np.mean([int(t) for t in st.values()]) for st in stamps], dtype=np.float64)
+    cams = np.array([len(st) for st in stamps])
+    point = torso_to_truth(np.where(ok[:, None], pred, 0.0), truth_offset_m)  # (N, 3)
+    pos = np.empty((len(lags), len(pred)))
+    yaw = np.empty((len(lags), len(pred)))
+    for k, lag in enumerate(lags):
+        err = point - truth_at(track, mean_t - lag * _NS_PER_MS)
+        pos[k] = np.linalg.norm(err[:, :2], axis=1) * 1000.0
+        yaw[k] = np.degrees(np.abs(wrap_angle(err[:, 2])))
+    buckets = {}
+    for key, mask in [("all", ok)] + [(str(c), ok & (cams == c)) for c in sorted(set(cams.tolist()))]:
+        if not mask.any():
+            continue
+        p, y = pos[:, mask].mean(axis=1), yaw[:, mask].mean(axis=1)
+        buckets[key] = {"samples": int(mask.sum()), "position_mm": p.round(1).tolist(), "yaw_deg": y.round(2).tolist(),
+                        "best_position_ms": lags[int(np.argmin(p))], "best_yaw_ms": lags[int(np.argmin(y))]}
+    return {"lags_ms": lags, "buckets": buckets}
+
+
+def format_latency_scan(name: str, scan: Mapping) -> str:
+    """A few lines on a ``latency_scan``: per bucket, the error at lag 0 and at the best lag."""
+    lags = list(scan["lags_ms"])
+    at0 = lags.index(0) if 0 in lags else None
+    lines = [f"{name}: error against the truth taken L ms before the views' mean capture time (the lag that fits best)"]
+    for key, b in scan["buckets"].items():
+        label = "all" if key == "all" else f"{key} cam{'s' if key != '1' else ''}"
+        bp, by = lags.index(b["best_position_ms"]), lags.index(b["best_yaw_ms"])
+        zero = "" if at0 is None else f"L=0: {b['position_mm'][at0]:.0f} mm, {b['yaw_deg'][at0]:.1f} deg; "
+        lines.append(f"  {label:7s} (n={b['samples']}): {zero}best position L={lags[bp]} ms {b['position_mm'][bp]:.0f} mm; "
+                     f"best yaw L={lags[by]} ms {b['yaw_deg'][by]:.1f} deg")
+    return "\n".join(lines)
 
 
 def replay_summary(rep: Replay, per_frame: NDArray, truth: NDArray, truth_offset_m: float) -> dict:

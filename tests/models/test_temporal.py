@@ -22,10 +22,13 @@ from superbody.models.evaluate import PREDICTIONS_HEADER, predict, score, write_
 from superbody.models.temporal import (
     SIGNATURE,
     jitter,
+    latency_scan,
     observation_batches,
     replay,
     replay_summary,
     simulated_recording,
+    truth_at,
+    truth_track,
     view_stamps,
 )
 from superbody.models.wtf import TRUTH_OFFSET_M, to_samples
@@ -266,6 +269,42 @@ def test_simulated_recording_rejects_bad_arguments():
 # --- the command --------------------------------------------------------------------------------
 
 
+# --- the truth's clock ---------------------------------------------------------------------------
+
+
+def test_truth_track_holds_every_views_own_truth(raw):
+    t_ns, truth = truth_track(raw)
+    assert np.all(np.diff(t_ns) > 0) and len(t_ns) == len({v.stamp_ms for s in raw for v in s.views})
+    assert np.all(np.abs(np.diff(truth[:, 2])) < np.pi)  # unwrapped
+    # Each sample's truth (its first view's) is the track at that view's stamp; so is every later view's.
+    at_first = truth_at((t_ns, truth), [s.stamp_ns for s in raw])
+    assert np.allclose(at_first, [s.truth for s in raw], atol=1e-9)
+    later = [(v.stamp_ms * 1_000_000, v.truth) for s in raw for v in s.views[1:] if v.stamp_ms != s.views[0].stamp_ms]
+    assert later and np.allclose(truth_at((t_ns, truth), [t for t, _ in later]), [tr for _, tr in later], atol=1e-9)
+    # Views of one sample carry different truths when captured apart.
+    assert any(not np.allclose(v.truth, s.truth) for s in raw for v in s.views)
+
+
+def test_latency_scan_finds_how_much_older_the_images_are():
+    S = 1_000_000_000
+    t = np.arange(0, 20 * S, 50_000_000)  # a truth every 50 ms: walking on a circle, turning
+    track = (t, np.stack([np.cos(0.3 * t / S), np.sin(0.3 * t / S), 0.3 * t / S + np.pi / 2], axis=1))
+    stamps = [{"1": int(k * 125_000_000 + 5 * S)} | ({"2": int(k * 125_000_000 + 5 * S + 30_000_000)} if k % 2 else {})
+              for k in range(60)]
+    mean_t = np.array([np.mean(list(st.values())) for st in stamps])
+    pred = truth_at(track, mean_t - 150_000_000)  # the images show the person 150 ms before their stamps
+    pred[7] = np.nan  # left out
+    scan = latency_scan(pred, stamps, track, truth_offset_m=0.0, lags_ms=range(0, 301, 50))
+    assert scan["lags_ms"] == [0, 50, 100, 150, 200, 250, 300]
+    assert {k: b["samples"] for k, b in scan["buckets"].items()} == {"all": 59, "1": 30, "2": 29}
+    for b in scan["buckets"].values():
+        assert b["best_position_ms"] == 150 and b["best_yaw_ms"] == 150
+        assert b["position_mm"][3] < 1e-6 and b["yaw_deg"][3] < 1e-6
+        assert b["position_mm"][0] > 40 and b["yaw_deg"][0] > 2  # 0.3 m/s, 17 deg/s for 150 ms
+    with pytest.raises(ValueError, match="2 predictions for 60 samples"):
+        latency_scan(pred[:2], stamps, track, 0.0)
+
+
 def _eval(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "superbody.edge.cli", "eval", *args], cwd=ROOT, capture_output=True, text=True, timeout=120)
 
@@ -307,10 +346,16 @@ def test_cli_temporal_with_the_shipped_model(dev_json, tmp_path):
 def test_cli_temporal_analytic_writes_the_host_poses(dev_json, dev, tmp_path):
     samples, stamps, per_frame = dev
     csv_out, out = tmp_path / "p.csv", tmp_path / "r.json"
-    proc = _eval("--dataset", str(dev_json), "--estimator", "analytic", "--temporal", "--predictions-out", str(csv_out), "--json-out", str(out))
+    proc = _eval("--dataset", str(dev_json), "--estimator", "analytic", "--temporal", "--predictions-out", str(csv_out), "--json-out", str(out),
+                 "--latency-scan")
     assert proc.returncode == 0, proc.stderr
     assert "analytic per-frame" in proc.stdout and "analytic temporal" in proc.stdout and "onnx" not in proc.stdout
     doc = json.loads(out.read_text())
+    # The latency scan: dev.json's images are older than their stamps on the truth's clock
+    # (measured: three-camera analytic 102 mm, 6.7 deg at L = 0; 78 mm, 5.0 deg at L = 175 ms).
+    assert "analytic: error against the truth taken L ms before" in proc.stdout
+    three = doc["latency_scan"]["analytic"]["buckets"]["3"]
+    assert three["samples"] == 103 and 100 <= three["best_position_ms"] <= 250 and 100 <= three["best_yaw_ms"] <= 250
     assert doc["model"] == "analytic" and set(doc["temporal"]["models"]) == {"analytic"}
     # The CSV holds the replay's poses: per-frame ones before the person is confirmed, then the host's.
     rep = replay(samples, stamps, per_frame, SITE, AnalyticEstimator(SITE), "analytic")
