@@ -200,6 +200,16 @@ def main(out_dir: Path, card: Path) -> int:
     L += _temporal(shipped, ".int8.onnx")
     L += ["", "Analytic estimator through the same host:", ""]
     L += _temporal(ana, "")
+    scan = (ana or {}).get("latency_scan", {}).get("analytic", {}).get("buckets", {}).get("3")
+    if scan:
+        lags = ana["latency_scan"]["analytic"]["lags_ms"]
+        z, bp, by = lags.index(0), lags.index(scan["best_position_ms"]), lags.index(scan["best_yaw_ms"])
+        L += ["", "The images are older than their stamps on the truth's clock (`superbody eval --latency-scan`: each view carries "
+              "its own truth, so the truth is a time series). Three-camera geometry against the truth taken L before the views' "
+              f"mean stamp: {scan['position_mm'][z]:.0f} mm, {scan['yaw_deg'][z]:.1f} deg at L = 0; position best at "
+              f"L = {lags[bp]} ms ({scan['position_mm'][bp]:.0f} mm), yaw at L = {lags[by]} ms ({scan['yaw_deg'][by]:.1f} deg). "
+              "A pose published at a sample's stamp cannot see that last part of the motion: it holds the temporal figures back, "
+              "yaw most while the person turns."]
     if demo:
         L += ["", "## On simulation: the demo", "",
               f"`superbody demo --duration 60 --clock-scale 3` (3 cameras, 3 people, seed 7, filtered): position MAE {demo['position_mae_mm']:.0f} mm, "

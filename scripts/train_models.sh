@@ -83,7 +83,7 @@ cp "$OUT/wtf-apartment.fp32.onnx" "$OUT/wtf-apartment.int8.onnx" "$OUT/site-inde
 # 5. The shipped model on dev.json (its own fine-tuning data: optimistic), per frame and temporal.
 $SB eval --dataset "$DEV" --site "$SITE" --model models/wtf-apartment.fp32.onnx --model models/wtf-apartment.int8.onnx \
     --temporal --json-out "$OUT/eval-shipped.json" --plots "$OUT/plots-shipped" | tee "$OUT/eval-shipped.txt"
-$SB eval --dataset "$DEV" --site "$SITE" --estimator analytic --temporal --json-out "$OUT/eval-analytic.json" | tee "$OUT/eval-analytic.txt"
+$SB eval --dataset "$DEV" --site "$SITE" --estimator analytic --temporal --latency-scan --json-out "$OUT/eval-analytic.json" | tee "$OUT/eval-analytic.txt"
 $SB coverage --site "$SITE" --model models/wtf-apartment.int8.onnx --dataset "$DEV" --out models/card --json-out "$OUT/coverage.json"
 $SB demo --duration 60 --clock-scale 3 --port 17480 --no-table --json-summary "$OUT/demo.json"
 .venv/bin/python benchmarks/model_bench.py --model models/wtf-apartment.int8.onnx --json-out "$OUT/bench-model.json" | tee "$OUT/bench-model.txt"

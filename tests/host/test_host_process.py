@@ -17,14 +17,15 @@ from tests.conftest import HostWatch, WTF_SITE, free_port
 SITE = str(WTF_SITE)
 
 
-# The model card's simulated figures for the shipped int8 model (the same demo, no camera killed):
-# position MAE 54 mm, yaw MAE 9.6 deg. Bounds here: 1.5 times those (camera 3 dies half way).
-CARD_POSITION_MM, CARD_YAW_DEG = 54.0, 9.6
+# The model card's simulated figures for the shipped model as the host runs it (fp32 hybrid; the
+# same demo, no camera killed): position MAE 41 mm, yaw MAE 12.0 deg. Bounds here: 1.5 times those
+# (camera 3 dies half way; measured with it killed: 40-45 mm, 10.0 deg).
+CARD_POSITION_MM, CARD_YAW_DEG = 41.0, 12.0
 
 
 @pytest.mark.slow
 def test_three_people_sixty_seconds_and_a_camera_killed():
-    """3 cameras, 3 people in distinct clothing, 60 simulated seconds at 3x, the shipped int8
+    """3 cameras, 3 people in distinct clothing, 60 simulated seconds at 3x, the shipped
     model; camera 3 dies at 30 s."""
     summary = run_demo(DemoConfig(site=SITE, people=3, seed=7, duration_s=60, clock_scale=3.0, port=free_port(),
                                   kill_camera="3", kill_at_s=30, table=False))
