@@ -58,6 +58,7 @@ from superbody.edge.observation import Observation, PersonView
 from superbody.edge.site import Site
 from superbody.host.aggregator import Aggregator, HostConfig
 from superbody.host.estimator import Estimator
+from superbody.models.evaluate import sample_errors
 from superbody.models.samples import Sample
 from superbody.models.wtf import RawSample, torso_to_truth
 
@@ -401,9 +402,8 @@ def latency_scan(
     pos = np.empty((len(lags), len(pred)))
     yaw = np.empty((len(lags), len(pred)))
     for k, lag in enumerate(lags):
-        err = point - truth_at(track, mean_t - lag * _NS_PER_MS)
-        pos[k] = np.linalg.norm(err[:, :2], axis=1) * 1000.0
-        yaw[k] = np.degrees(np.abs(wrap_angle(err[:, 2])))
+        err = sample_errors(point, truth_at(track, mean_t - lag * _NS_PER_MS))  # (N, 3) mm, mm, deg
+        pos[k], yaw[k] = np.hypot(err[:, 0], err[:, 1]), err[:, 2]
     buckets = {}
     for key, mask in [("all", ok)] + [(str(c), ok & (cams == c)) for c in sorted(set(cams.tolist()))]:
         if not mask.any():

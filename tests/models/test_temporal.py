@@ -266,9 +266,6 @@ def test_simulated_recording_rejects_bad_arguments():
         simulated_recording(SITE, 0.0)
 
 
-# --- the command --------------------------------------------------------------------------------
-
-
 # --- the truth's clock ---------------------------------------------------------------------------
 
 
@@ -303,6 +300,9 @@ def test_latency_scan_finds_how_much_older_the_images_are():
         assert b["position_mm"][0] > 40 and b["yaw_deg"][0] > 2  # 0.3 m/s, 17 deg/s for 150 ms
     with pytest.raises(ValueError, match="2 predictions for 60 samples"):
         latency_scan(pred[:2], stamps, track, 0.0)
+
+
+# --- the command --------------------------------------------------------------------------------
 
 
 def _eval(*args: str) -> subprocess.CompletedProcess:
