@@ -183,7 +183,8 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
     for path in args.cv:
         try:
             with np.load(path) as cv:
-                members.append({k: cv[k] for k in ("predictions", "std", "fold", "truth", "truth_offset_m")})
+                members.append({k: cv[k] for k in ("predictions", "std", "fold", "truth", "truth_offset_m")
+                                + tuple(k for k in ("predictions_int8", "std_int8") if k in cv.files)})
         except (OSError, ValueError, KeyError) as e:
             return _fail(command, f"--cv {path}: not a crossval predictions file ({e})")
         if len(members[-1]["predictions"]) != len(samples):
@@ -194,12 +195,15 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
             return _fail(command, f"--cv {path}: other folds, samples or truth offset than --cv {args.cv[0]} (an ensemble's members "
                                   "must be cross-validated on the same split)")
     fold, offset = members[0]["fold"], float(members[0]["truth_offset_m"])
-    if len(members) == 1:
-        net, std = members[0]["predictions"], members[0]["std"]
-    else:
-        from superbody.models.ensemble import combine
+    from superbody.models.ensemble import combine
 
-        net, std = combine(np.stack([m["predictions"] for m in members]), np.stack([m["std"] for m in members]))
+    def combined(key: str):  # the members' held-out predictions combined as the ensemble combines them
+        return combine(np.stack([m[f"predictions{key}"] for m in members]), np.stack([m[f"std{key}"] for m in members]))
+
+    net, std = combined("")
+    # int8: each fold model quantised as shipped (crossval --int8), fused with the fp32 calibration
+    has_int8 = all("predictions_int8" in m for m in members)
+    net8, std8 = combined("_int8") if has_int8 else (None, None)
     for m in args.model:
         if not m.is_file():
             return _fail(command, f"--model {m}: no such file")
@@ -211,9 +215,14 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
         cal = hybrid.fit_analytic(analytic, pair, truth, cams, source=f"{args.dataset.name}, {len(samples)} samples; network sigmas from {' + '.join(p.name for p in args.cv)}")
         cal = hybrid.fit_trust(net, hybrid.scaled_std(std, scale, cams), analytic, pair, truth, cams, cal)
         lofo, lofo_std, source = hybrid.leave_one_fold_out(net, std, analytic, pair, truth, cams, fold, site)
+        if has_int8:
+            lofo8 = hybrid.leave_one_fold_out(net, std, analytic, pair, truth, cams, fold, site, apply_to=(net8, std8))[0]
     except ValueError as e:
         return _fail(command, str(e))
-    reports = score(samples, {"hybrid (CV)": lofo, "network (CV)": net, "analytic": analytic}, offset)
+    scored = {"hybrid (CV)": lofo, "network (CV)": net}
+    if has_int8:
+        scored.update({"hybrid int8 (CV)": lofo8, "network int8 (CV)": net8})
+    reports = score(samples, {**scored, "analytic": analytic}, offset)
     coverage = {"network": hybrid.sigma_coverage(net, hybrid.scaled_std(std, scale, cams), truth),
                 "hybrid": hybrid.sigma_coverage(lofo, lofo_std, truth)}
     print("network sigma scale (x, y, yaw) by cameras: " + "; ".join(f"{k}: {', '.join(f'{v:.2f}' for v in row)}" for k, row in zip((1, 2, 3), scale)))
@@ -228,15 +237,28 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
               f"within 2 sigma {', '.join(f'{v:.2f}' for v in cov['within_2_sigma'])} (a calibrated Gaussian: 0.68, 0.95)")
     print("hybrid sources: " + ", ".join(f"{s} {int((source == s).sum())}" for s in ("hybrid", "onnx", "analytic")))
     print(format_table(reports, offset))
+    int8_change = _int8_change(reports["hybrid (CV)"], reports["hybrid int8 (CV)"]) if has_int8 else None
+    if int8_change is not None:
+        print("hybrid int8 vs fp32 on the cross-validation: " + ", ".join(f"{k} {v:+.1f}%" for k, v in int8_change.items()))
+    else:
+        print("no int8 figure: not every --cv file has int8 predictions (superbody crossval --int8)")
     for m in args.model:
         hybrid.write_calibration(m, scale, cal)
         print(f"wrote the calibration into {m}")
     if args.json_out is not None:
         doc = {"std_scale": scale.tolist(), "calibration": json.loads(cal.to_json()), "coverage": coverage,
-               "sources": {s: int((source == s).sum()) for s in ("hybrid", "onnx", "analytic")}, "reports": reports, "truth_offset_m": offset}
+               "sources": {s: int((source == s).sum()) for s in ("hybrid", "onnx", "analytic")}, "reports": reports, "truth_offset_m": offset,
+               "int8_vs_fp32_percent": int8_change}
         args.json_out.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
         print(f"wrote {args.json_out}")
     return 0
+
+
+def _int8_change(fp32: dict, int8: dict) -> dict[str, float]:
+    """The relative change (%) of int8 over fp32 in x, y and yaw MAE (reports as ``score`` gives them)."""
+    pairs = {"x MAE": (fp32["position_mae_mm"]["x"], int8["position_mae_mm"]["x"]),
+             "y MAE": (fp32["position_mae_mm"]["y"], int8["position_mae_mm"]["y"]), "yaw MAE": (fp32["yaw_mae_deg"], int8["yaw_mae_deg"])}
+    return {k: round(100 * (b - a) / a, 2) for k, (a, b) in pairs.items()}
 
 
 # --- calibrate oak-intrinsics -------------------------------------------------------------------

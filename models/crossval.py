@@ -80,8 +80,13 @@ def spatial_folds(xy: NDArray, folds: int, buffer_m: float = 0.3, seed: int = 0)
 
 
 def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = None, progress: bool = False,
-                  split: str = "time", buffer_m: float = 0.3) -> dict:
+                  split: str = "time", buffer_m: float = 0.3, int8: bool = False) -> dict:
     """Train one model per fold and score the held-out predictions.
+
+    With ``int8``, each fold's model is also exported and quantised as ``superbody train``
+    ships it (fast-GAT ONNX, static int8 on its training graphs) and predicts its held-out
+    samples through onnxruntime: ``"predictions_int8"``, ``"std_int8"`` and a ``"model int8"``
+    report, the int8 figure on data no fold model saw.
 
     Returns:
         ``{"folds": [...], "reports": {"model": report, "analytic": report}, "predictions",
@@ -104,6 +109,8 @@ def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = N
         blocks = spatial_folds(np.array([s.truth[:2] for s in samples]), folds, buffer_m, seed=cfg.seed)
     pred = np.full((len(samples), 3), np.nan)
     std = np.full((len(samples), 3), np.nan)
+    pred8 = np.full((len(samples), 3), np.nan)
+    std8 = np.full((len(samples), 3), np.nan)
     fold_of = np.zeros(len(samples), np.int64)
     info = []
     for k, (held, excluded) in enumerate(blocks):
@@ -112,13 +119,32 @@ def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = N
         result = train(fold_cfg, progress=progress)
         est = _TorchEstimator(result.model, result.spec, site)
         pred[held], std[held] = est.estimate_with_std([samples[i].views for i in held])
+        if int8:
+            pred8[held], std8[held] = _int8_estimates(result, fold_cfg, site, [samples[i].views for i in held])
         fold_of[held] = k + 1
         info.append({"fold": k + 1, "held_out": int(len(held)), "excluded": int(len(excluded)), "best_epoch": result.best_epoch,
                      "minutes": round(result.minutes, 2)})
     baseline = predict(samples, AnalyticEstimator(site))
-    return {"folds": info, "reports": score(samples, {"model": pred, "analytic": baseline}, offset), "truth_offset_m": offset,
-            "predictions": pred, "std": std, "analytic": baseline, "fold": fold_of, "split": split,
-            "truth": np.array([s.truth for s in samples]), "views": np.array([len(s.views) for s in samples])}
+    scored = {"model": pred, **({"model int8": pred8} if int8 else {}), "analytic": baseline}
+    out = {"folds": info, "reports": score(samples, scored, offset), "truth_offset_m": offset,
+           "predictions": pred, "std": std, "analytic": baseline, "fold": fold_of, "split": split,
+           "truth": np.array([s.truth for s in samples]), "views": np.array([len(s.views) for s in samples])}
+    if int8:
+        out.update(predictions_int8=pred8, std_int8=std8)
+    return out
+
+
+def _int8_estimates(result, cfg: TrainConfig, site, view_sets) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """A fold's model written as ``superbody train`` writes it (fp32 and int8 ONNX), and the int8
+    model's poses and raw 1-sigmas (no std scale in its metadata) for ``view_sets``."""
+    import tempfile
+
+    from superbody.host.estimator import OnnxEstimator
+    from superbody.models.train import save
+
+    with tempfile.TemporaryDirectory() as tmp:
+        paths = save(result, cfg, tmp, "fold")
+        return OnnxEstimator(paths["int8"], site).estimate_with_std(view_sets)
 
 
 class _TorchEstimator:
@@ -160,14 +186,15 @@ def _run(args: argparse.Namespace) -> int:
         print(f"superbody crossval: error: {e}", file=sys.stderr)
         return 2
     out = crossvalidate(cfg, args.folds, args.truth_offset, progress=sys.stderr.isatty() and not args.no_progress,
-                        split=args.split, buffer_m=args.buffer)
+                        split=args.split, buffer_m=args.buffer, int8=args.int8)
     print(f"blocked {args.folds}-fold cross-validation ({args.split} blocks) on {cfg.real} ({cfg.arch}, {cfg.variant}{', 3D' if cfg.use_3d else ''}):")
     print(format_table(out["reports"], out["truth_offset_m"]))
     if args.json_out:
         doc = {"config": cfg.to_json(), "split": args.split, "folds": out["folds"], "truth_offset_m": out["truth_offset_m"], **out["reports"]}
         Path(args.json_out).write_text(json.dumps(doc, indent=1) + "\n")
     if args.predictions_out:
-        np.savez(args.predictions_out, **{k: out[k] for k in ("predictions", "std", "analytic", "truth", "views", "fold")},
+        keys = ("predictions", "std", "analytic", "truth", "views", "fold") + (("predictions_int8", "std_int8") if args.int8 else ())
+        np.savez(args.predictions_out, **{k: out[k] for k in keys},
                  truth_offset_m=out["truth_offset_m"], split=args.split)
     return 0
 
@@ -178,6 +205,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--folds", type=int, default=5, help="folds (default 5)")
     p.add_argument("--split", choices=SPLITS, default="time", help="block the file by time segments or by floor regions (default time)")
     p.add_argument("--buffer", type=float, default=0.3, help="--split space: also keep samples this close (m) to the held-out region out of training")
+    p.add_argument("--int8", action="store_true",
+                   help="also quantise each fold's model to int8 as train ships it and score its held-out predictions (kept in --predictions-out)")
     p.add_argument("--predictions-out", help="write the held-out predictions, sigmas, analytic poses and truth (.npz)")
     p.add_argument("--truth-offset", type=float, default=None, help="chest-tracker offset of the file's truth, metres (default: the dataset's)")
     p.add_argument("--json-out", help="write the reports as JSON")

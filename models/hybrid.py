@@ -166,9 +166,15 @@ def fit_trust(net: NDArray, net_std: NDArray, analytic: NDArray, pair: NDArray, 
 
 def leave_one_fold_out(
     net: NDArray, net_std: NDArray, analytic: NDArray, pair: NDArray, truth: NDArray, cameras: NDArray, fold: NDArray, site: Site,
+    apply_to: tuple[NDArray, NDArray] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.str_]]:
     """Hybrid poses where each fold's calibration (std scale, analytic sigmas, trust) comes from
-    the other folds only: an honest figure for the hybrid on the cross-validation."""
+    the other folds only: an honest figure for the hybrid on the cross-validation.
+
+    ``apply_to``: other network poses and raw sigmas (e.g. the int8 models' held-out
+    predictions) to fuse with each fold's calibration, which is still fitted on ``net`` and
+    ``net_std``: as the shipped int8 model carries the calibration fitted on fp32."""
+    use, use_std = (net, net_std) if apply_to is None else apply_to
     pose = np.full_like(net, np.nan)
     std = np.full_like(net, np.nan)
     source = np.full(len(net), "", dtype=object)
@@ -177,7 +183,7 @@ def leave_one_fold_out(
         scale = fit_std_scale(net[train], net_std[train], truth[train], cameras[train])
         cal = fit_analytic(analytic[train], pair[train], truth[train], cameras[train])
         cal = fit_trust(net[train], scaled_std(net_std[train], scale, cameras[train]), analytic[train], pair[train], truth[train], cameras[train], cal)
-        pose[test], std[test], source[test] = hybrid_poses(net[test], scaled_std(net_std[test], scale, cameras[test]), analytic[test],
+        pose[test], std[test], source[test] = hybrid_poses(use[test], scaled_std(use_std[test], scale, cameras[test]), analytic[test],
                                                            pair[test], cameras[test], cal, site)
     return pose, std, source.astype(str)
 

@@ -91,9 +91,15 @@ def _cv_section(title: str, text: str, doc: dict | None) -> list[str]:
     if not doc:
         return L + ["(not run)"]
     r = doc["reports"]
-    rows = [("hybrid (CV)", r["hybrid (CV)"]), ("network alone (CV)", r["network (CV)"]), ("analytic baseline", r["analytic"])]
+    rows = [("hybrid (CV)", r["hybrid (CV)"]), ("network alone (CV)", r["network (CV)"])]
+    rows += [(n, r[k]) for n, k in (("hybrid int8 (CV)", "hybrid int8 (CV)"), ("network alone int8 (CV)", "network int8 (CV)")) if k in r]
+    rows += [("analytic baseline", r["analytic"])]
     L += _table(rows)
-    L += ["", *_by_cameras([(n, x["by_cameras"]) for n, x in rows])]
+    change = doc.get("int8_vs_fp32_percent")
+    if change:
+        L += ["", "Hybrid int8 against fp32 on this cross-validation (each fold's model quantised as shipped, `superbody crossval --int8`): "
+              + ", ".join(f"{k} {v:+.1f}%" for k, v in change.items()) + "."]
+    L += ["", *_by_cameras([(n, x["by_cameras"]) for n, x in rows if "int8" not in n])]
     s = doc.get("sources", {})
     L += ["", "Hybrid sources: " + ", ".join(f"{k} {v}" for k, v in s.items()) + "."]
     return L

@@ -11,7 +11,8 @@
 #   3. the members combined into one ONNX model (superbody ensemble);
 #   4. the hybrid calibration (network sigma scale, analytic sigma per camera count) from the
 #      members' spatial cross-validations combined as the ensemble combines them, written into
-#      the shipped models;
+#      the shipped models; each fold's model is also quantised to int8 as shipped (crossval
+#      --int8), so the card gives the int8 hybrid's figures on the cross-validation too;
 #   5. evaluation on dev.json (per frame and temporal, through the host's aggregator), the
 #      coverage maps, the demo on simulation, the inference benchmark, and the card.
 # About 2 hours on 2 cores. Outputs in build/models; the shipped files are copied to models/.
@@ -40,7 +41,7 @@ train() {  # NAME ARGS...
 crossval() {  # SPLIT MEMBER INIT SIM_SEED
   local split=$1 member=$2 init=$3 seed=$4
   if [ -f "$OUT/crossval-$split-$member.npz" ]; then echo "reusing $OUT/crossval-$split-$member.*"; return; fi
-  $SB crossval "${COMMON[@]}" "${FINETUNE[@]}" --sim-seed "$seed" --init "$init" --folds 5 --split "$split" --threads 1 \
+  $SB crossval "${COMMON[@]}" "${FINETUNE[@]}" --sim-seed "$seed" --init "$init" --folds 5 --split "$split" --threads 1 --int8 \
       --json-out "$OUT/crossval-$split-$member.json" --predictions-out "$OUT/crossval-$split-$member.npz" \
       2> "$OUT/crossval-$split-$member.log" > "$OUT/crossval-$split-$member.txt"
   echo "crossval $split $member done"

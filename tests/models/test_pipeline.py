@@ -74,8 +74,14 @@ def test_calibrate_hybrid_writes_the_model_that_the_host_then_runs_as_hybrid(tin
     npz = tmp_path / "cv.npz"
     r = _cli("crossval", "--site", str(WTF_SITE), "--real", str(dev_json), "--folds", "3", "--arch", "gat", "--split", "space",
              "--hparams", '{"hidden": 16, "heads": 2, "layers": 2}', "--sim-samples", "300", "--epochs", "1", "--real-repeat", "2",
-             "--predictions-out", str(npz))
+             "--int8", "--predictions-out", str(npz))
     assert r.returncode == 0, r.stderr[-2000:]
+    assert "model int8" in r.stdout  # each fold's model quantised as train ships it, scored on its held-out samples
+    z = np.load(npz)
+    assert np.isfinite(z["predictions_int8"]).all() and (z["std_int8"] > 0).all()
+    drift = z["predictions_int8"] - z["predictions"]
+    drift[:, 2] = np.angle(np.exp(1j * drift[:, 2]))  # yaw wrapped
+    assert 0 < np.abs(drift).max() < 0.5  # int8 drifts from fp32, a little
     model = tmp_path / "m.int8.onnx"
     shutil.copy(tiny / "tiny.int8.onnx", model)
     r = _cli("calibrate", "hybrid", "--cv", str(npz), "--dataset", str(dev_json), "--model", str(model), "--json-out", str(tmp_path / "h.json"))
@@ -83,6 +89,7 @@ def test_calibrate_hybrid_writes_the_model_that_the_host_then_runs_as_hybrid(tin
     assert "trust in the network" in r.stdout and "hybrid (CV)" in r.stdout
     doc = json.loads((tmp_path / "h.json").read_text())
     assert len(doc["std_scale"]) == 3 and sum(doc["sources"].values()) == 225
+    assert "hybrid int8 (CV)" in doc["reports"] and set(doc["int8_vs_fp32_percent"]) == {"x MAE", "y MAE", "yaw MAE"}
     meta = {p.key: p.value for p in onnx.load(str(model)).metadata_props}
     assert "hybrid.calibration" in meta and "pose.std_scale" in meta
     r = _cli("eval", "--dataset", str(dev_json), "--model", str(model))
