@@ -201,7 +201,7 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
         return combine(np.stack([m[f"predictions{key}"] for m in members]), np.stack([m[f"std{key}"] for m in members]))
 
     net, std = combined("")
-    # int8: each fold model quantised as shipped (crossval --int8), fused with the fp32 calibration
+    # int8: each fold model quantised as train quantises (crossval --int8), fused with the fp32 calibration
     has_int8 = all("predictions_int8" in m for m in members)
     net8, std8 = combined("_int8") if has_int8 else (None, None)
     for m in args.model:

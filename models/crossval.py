@@ -84,7 +84,8 @@ def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = N
     """Train one model per fold and score the held-out predictions.
 
     With ``int8``, each fold's model is also exported and quantised as ``superbody train``
-    ships it (fast-GAT ONNX, static int8 on its training graphs) and predicts its held-out
+    writes it (fast-GAT ONNX, static int8 with the shipped keep-list, MinMax ranges from its
+    training graphs; ``superbody ensemble`` takes them from simulated graphs) and predicts its held-out
     samples through onnxruntime: ``"predictions_int8"``, ``"std_int8"`` and a ``"model int8"``
     report, the int8 figure on data no fold model saw.
 
@@ -206,7 +207,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--split", choices=SPLITS, default="time", help="block the file by time segments or by floor regions (default time)")
     p.add_argument("--buffer", type=float, default=0.3, help="--split space: also keep samples this close (m) to the held-out region out of training")
     p.add_argument("--int8", action="store_true",
-                   help="also quantise each fold's model to int8 as train ships it and score its held-out predictions (kept in --predictions-out)")
+                   help="also quantise each fold's model to int8 as train writes it and score its held-out predictions (kept in --predictions-out)")
     p.add_argument("--predictions-out", help="write the held-out predictions, sigmas, analytic poses and truth (.npz)")
     p.add_argument("--truth-offset", type=float, default=None, help="chest-tracker offset of the file's truth, metres (default: the dataset's)")
     p.add_argument("--json-out", help="write the reports as JSON")

@@ -97,7 +97,7 @@ def _cv_section(title: str, text: str, doc: dict | None) -> list[str]:
     L += _table(rows)
     change = doc.get("int8_vs_fp32_percent")
     if change:
-        L += ["", "Hybrid int8 against fp32 on this cross-validation (each fold's model quantised as shipped, `superbody crossval --int8`): "
+        L += ["", "Hybrid int8 against fp32 on this cross-validation (each fold's model quantised as `superbody train` quantises, the shipped scheme and keep-list with ranges from the fold's training graphs: `superbody crossval --int8`): "
               + ", ".join(f"{k} {v:+.1f}%" for k, v in change.items()) + "."]
     L += ["", *_by_cameras([(n, x["by_cameras"]) for n, x in rows if "int8" not in n])]
     s = doc.get("sources", {})

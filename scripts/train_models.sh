@@ -11,7 +11,7 @@
 #   3. the members combined into one ONNX model (superbody ensemble);
 #   4. the hybrid calibration (network sigma scale, analytic sigma per camera count) from the
 #      members' spatial cross-validations combined as the ensemble combines them, written into
-#      the shipped models; each fold's model is also quantised to int8 as shipped (crossval
+#      the shipped models; each fold's model is also quantised to int8 as train does it (crossval
 #      --int8), so the card gives the int8 hybrid's figures on the cross-validation too;
 #   5. evaluation on dev.json (per frame and temporal, through the host's aggregator), the
 #      coverage maps, the demo on simulation, the inference benchmark, and the card.
