@@ -170,7 +170,7 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
 
     from superbody.edge.site import SiteError, load_site
     from superbody.models import hybrid
-    from superbody.models.evaluate import format_table, score
+    from superbody.models.evaluate import format_table, relative_change, score
     from superbody.models.wtf import DatasetError, load_wtf, truth_to_torso
 
     command = "calibrate hybrid"
@@ -237,7 +237,8 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
               f"within 2 sigma {', '.join(f'{v:.2f}' for v in cov['within_2_sigma'])} (a calibrated Gaussian: 0.68, 0.95)")
     print("hybrid sources: " + ", ".join(f"{s} {int((source == s).sum())}" for s in ("hybrid", "onnx", "analytic")))
     print(format_table(reports, offset))
-    int8_change = _int8_change(reports["hybrid (CV)"], reports["hybrid int8 (CV)"]) if has_int8 else None
+    int8_change = ({k: round(v, 2) for k, v in relative_change(reports["hybrid (CV)"], reports["hybrid int8 (CV)"], ("x MAE", "y MAE", "yaw MAE")).items()}
+                   if has_int8 else None)
     if int8_change is not None:
         print("hybrid int8 vs fp32 on the cross-validation: " + ", ".join(f"{k} {v:+.1f}%" for k, v in int8_change.items()))
     else:
@@ -252,13 +253,6 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
         args.json_out.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
         print(f"wrote {args.json_out}")
     return 0
-
-
-def _int8_change(fp32: dict, int8: dict) -> dict[str, float]:
-    """The relative change (%) of int8 over fp32 in x, y and yaw MAE (reports as ``score`` gives them)."""
-    pairs = {"x MAE": (fp32["position_mae_mm"]["x"], int8["position_mae_mm"]["x"]),
-             "y MAE": (fp32["position_mae_mm"]["y"], int8["position_mae_mm"]["y"]), "yaw MAE": (fp32["yaw_mae_deg"], int8["yaw_mae_deg"])}
-    return {k: round(100 * (b - a) / a, 2) for k, (a, b) in pairs.items()}
 
 
 # --- calibrate oak-intrinsics -------------------------------------------------------------------

@@ -51,6 +51,8 @@ __all__ = [
     "predict",
     "summarise",
     "score",
+    "REPORT_METRICS",
+    "relative_change",
     "evaluate",
     "json_report",
     "format_table",
@@ -215,6 +217,25 @@ def predict(
             out[start : start + len(batch)] = estimator.estimate([s.views for s in batch])
             bar.update(len(batch))
     return out
+
+
+# A report's headline metrics (``summarise``): name -> its path in the report.
+REPORT_METRICS: Final[dict[str, tuple[str, ...]]] = {
+    "x MAE": ("position_mae_mm", "x"), "y MAE": ("position_mae_mm", "y"), "yaw MAE": ("yaw_mae_deg",),
+    "MSE orientation": ("paper_mse", "orientation"), "MSE position": ("paper_mse", "position"), "MSE global": ("paper_mse", "global"),
+}
+
+
+def relative_change(before: Mapping, after: Mapping, metrics: Sequence[str] = tuple(REPORT_METRICS)) -> dict[str, float]:
+    """The change (%) of ``after`` over ``before`` in each of ``metrics`` (keys of ``REPORT_METRICS``),
+    both reports as ``summarise`` gives them: e.g. an int8 model against its fp32 twin."""
+
+    def get(report: Mapping, path: tuple[str, ...]) -> float:
+        for key in path:
+            report = report[key]
+        return float(report)  # type: ignore[arg-type]
+
+    return {m: 100 * (get(after, REPORT_METRICS[m]) - get(before, REPORT_METRICS[m])) / get(before, REPORT_METRICS[m]) for m in metrics}
 
 
 def score(samples: Sequence[Sample], predictions: Mapping[str, NDArray], truth_offset_m: float) -> dict[str, dict]:

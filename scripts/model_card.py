@@ -11,6 +11,8 @@ import math
 import sys
 from pathlib import Path
 
+from superbody.models.evaluate import relative_change
+
 PAPER = {  # the paper's 2D-feature MSE cells on its test split (orientation, position)
     "DS2 (simulation only)": (0.058, 0.0049),
     "DS1 (simulation + real)": (0.020, 0.0011),
@@ -57,9 +59,7 @@ def _int8_check(doc: dict | None) -> list[str]:
     fp, q = _model(doc, ".fp32.onnx"), _model(doc, ".int8.onnx")
     if not (fp and q):
         return []
-    pairs = [("x MAE", fp["position_mae_mm"]["x"], q["position_mae_mm"]["x"]), ("y MAE", fp["position_mae_mm"]["y"], q["position_mae_mm"]["y"]),
-             ("yaw MAE", fp["yaw_mae_deg"], q["yaw_mae_deg"])] + [(f"MSE {k}", fp["paper_mse"][k], q["paper_mse"][k]) for k in ("orientation", "position", "global")]
-    return [f"{n} {100 * (b - a) / a:+.1f}%" for n, a, b in pairs]
+    return [f"{n} {v:+.1f}%" for n, v in relative_change(fp, q).items()]
 
 
 def _sigma_table(cov: dict | None) -> list[str]:
