@@ -28,14 +28,16 @@ class SimSource:
         seed: world seed; nodes with the same seed see the same people.
         people: number of simulated people.
         depth: simulate a depth camera (3D joints in the detections).
-        clock: the world clock that paces the frames.
+        clock: the world clock that paces the frames. Its anchor is also the scene's start
+            (``World.epoch_s``): a run whose processes share an anchor (``superbody demo``)
+            shows the same scene every time.
     """
 
     def __init__(self, site: Site, camera_id: str, seed: int = 0, people: int = 3, depth: bool = False,
                  clock: WorldClock = WorldClock()):
         from superbody.edge.simulator import SimCamera, World
 
-        self._cam = SimCamera(World(site, people, seed), camera_id, depth=depth)
+        self._cam = SimCamera(World(site, people, seed, epoch_s=clock.anchor_ns * 1e-9), camera_id, depth=depth)
         self.clock = clock
         self.period_ns = 1e9 / self._cam.camera.fps
         self.phase_ns = self.period_ns * site.camera_index(camera_id) / max(len(site.cameras), 1)

@@ -482,13 +482,20 @@ class World:
         num_people: how many people.
         seed: every person's body, clothes and plan follow from it.
         period_s: the plans repeat after about this long.
+        epoch_s: the absolute time (seconds) at which the scene starts: the plans are a
+            function of ``t_s - epoch_s``, so worlds with the same seed and epoch show the
+            same scene at the same times since the epoch. With the default 0 the scene's
+            phase follows the wall clock, a different stretch of it on every run.
     """
 
-    def __init__(self, site: Site, num_people: int = 3, seed: int = 0, period_s: float = 600.0):
+    def __init__(self, site: Site, num_people: int = 3, seed: int = 0, period_s: float = 600.0, epoch_s: float = 0.0):
         if not 0 <= num_people <= 64:
             raise ValueError(f"num_people must be in [0, 64], got {num_people}")
+        if not math.isfinite(epoch_s):
+            raise ValueError(f"epoch_s must be finite, got {epoch_s}")
         self.site = site
         self.seed = seed
+        self.epoch_s = float(epoch_s)
         rng = np.random.default_rng([seed, 0x5B0D])
         hues = _distinct_hues(rng, num_people)
         free = _free_space(site)
@@ -515,7 +522,7 @@ class World:
         for person, p in zip(self.people, planners):
             p.plan.period = period
             person._plan = p.plan
-            person.phase_offset = offset
+            person.phase_offset = offset - self.epoch_s
 
     def states(self, t_s: float) -> list[PersonState]:
         """Every person's state at absolute time ``t_s`` (seconds)."""

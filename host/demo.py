@@ -259,7 +259,7 @@ def run_demo(cfg: DemoConfig, stop: threading.Event | None = None) -> dict:
         procs["host"] = _spawn(host_args, log_dir / "host.log")
         print(f"superbody demo: router on {endpoint}, {len(site.cameras)} cameras and the host started; logs in {log_dir}", file=sys.stderr)
 
-        watcher = _Watcher(site, World(site, cfg.people, cfg.seed), clock.now_ns())
+        watcher = _Watcher(site, World(site, cfg.people, cfg.seed, epoch_s=anchor * 1e-9), clock.now_ns())
         conf = transport.session_config("peer", connect=[endpoint])
         with zenoh.open(conf) as session:
             subs = [session.declare_subscriber(transport.observation_key(site.name), watcher.on_observation),

@@ -31,6 +31,21 @@ def test_same_seed_same_world_whatever_the_query_order(site):
     assert [(s.x, s.y) for s in other] != [(s.x, s.y) for s in a.states(T0)]
 
 
+def test_an_epoch_fixes_the_scene_to_the_time_since_it(site):
+    """Worlds with the same seed and epoch show the same scene at the same time since the epoch,
+    whatever the epoch (the demo's runs all start its scene at their clock anchor); without one
+    the wall clock picks the stretch."""
+    since = np.arange(0, 20, 0.5)
+    a, b = World(site, 3, seed=5, epoch_s=T0), World(site, 3, seed=5, epoch_s=T0 + 1234.5)
+    def scene(world, t0):
+        return np.array([[(s.x, s.y, s.yaw) for s in world.states(t0 + d)] for d in since])  # (T, 3, 3)
+
+    np.testing.assert_allclose(scene(a, T0), scene(b, T0 + 1234.5), atol=1e-6)
+    assert np.abs(scene(World(site, 3, seed=5), T0 + 1234.5) - scene(b, T0 + 1234.5))[:, :, :2].max() > 0.1
+    with pytest.raises(ValueError, match="epoch_s"):
+        World(site, 1, seed=5, epoch_s=math.nan)
+
+
 def test_people_stay_on_the_floor_out_of_obstacles_and_move_plausibly(site):
     world = World(site, 4, seed=1)
     dt = 0.1

@@ -1,11 +1,12 @@
 """The demo's simulated scene, replayed in-process through the host's aggregator.
 
-The demo's world (site wtf-apartment, 3 people, seed 7) repeats every ~609 s, and a run sees
-the stretch of it that the wall clock picks. ``test_host_process.py``'s 60-s demo therefore
-met a different stretch each run, and failed about 1 run in 12: in some stretches a fourth
-track appeared and its poses alternated with a real person's (8-18 identity switches). Here
-the stretches that did so are replayed deterministically, each camera's frames at its own
-capture instants, so the defect cannot hide behind the clock.
+The demo's world (site wtf-apartment, 3 people, seed 7) repeats every ~609 s. Until the demo
+started its scene at its clock anchor (``World.epoch_s``), a run saw the stretch of it that
+the wall clock picked: ``test_host_process.py``'s 60-s demo met a different stretch each run,
+and failed about 1 run in 12: in some stretches a fourth track appeared and its poses
+alternated with a real person's (8-18 identity switches). Here the stretches that did so are
+replayed deterministically, each camera's frames at its own capture instants, so the defect
+cannot hide behind the clock.
 """
 
 from __future__ import annotations
