@@ -45,7 +45,7 @@ def add_clock_args(parser: argparse.ArgumentParser) -> None:
     from superbody.edge.cli import positive
 
     parser.add_argument("--clock-scale", type=positive, default=1.0, help="world seconds per wall second (simulation speed-up)")
-    parser.add_argument("--clock-anchor-ns", type=int, default=0, help="wall time (UNIX ns) at which world and wall clocks agree")
+    parser.add_argument("--clock-anchor-ns", type=int, default=0, help="wall time (UNIX ns) at which world and wall clocks agree; a simulated source's scene starts there")
 
 
 def clock_from_args(args: argparse.Namespace) -> WorldClock:
