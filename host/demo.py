@@ -348,7 +348,8 @@ def _run(args: argparse.Namespace) -> int:
         return 1
     _print_summary(summary)
     if args.json_summary:
-        keys = ("people_simulated", "people_confirmed", "id_switches", "position_mae_mm", "yaw_mae_deg", "latency_ms", "poses_published")
+        keys = ("people_simulated", "people_confirmed", "tracks", "confirm_delay_s", "id_switches", "position_mae_mm", "yaw_mae_deg",
+                "latency_ms", "poses_published")
         Path(args.json_summary).write_text(json.dumps({k: summary[k] for k in keys}, indent=1) + "\n")
     return 0
 

@@ -89,4 +89,5 @@ def test_installed_wheel_runs_version_and_the_demo_from_an_empty_folder(installe
     doc = json.loads(summary.read_text())
     assert doc["poses_published"] > 0, demo.stdout
     assert doc["people_confirmed"] >= 1, demo.stdout
+    assert doc["tracks"] >= doc["people_confirmed"] and len(doc["confirm_delay_s"]) <= doc["people_confirmed"], doc  # as printed
     assert [p.name for p in empty.iterdir()] == ["summary.json"]  # the demo wrote nothing else where it ran
