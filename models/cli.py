@@ -211,9 +211,8 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
     cams = np.array([len(s.views) for s in samples])
     analytic, pair = hybrid.analytic_with_pairs(samples, site)
     try:
-        scale = hybrid.fit_std_scale(net, std, truth, cams)
-        cal = hybrid.fit_analytic(analytic, pair, truth, cams, source=f"{args.dataset.name}, {len(samples)} samples; network sigmas from {' + '.join(p.name for p in args.cv)}")
-        cal = hybrid.fit_trust(net, hybrid.scaled_std(std, scale, cams), analytic, pair, truth, cams, cal)
+        scale, cal = hybrid.fit_calibration(net, std, analytic, pair, truth, cams, source=(
+            f"{args.dataset.name}, {len(samples)} samples; network sigmas from {' + '.join(p.name for p in args.cv)}"))
         lofo, lofo_std, source = hybrid.leave_one_fold_out(net, std, analytic, pair, truth, cams, fold, site)
         if has_int8:
             lofo8 = hybrid.leave_one_fold_out(net, std, analytic, pair, truth, cams, fold, site, apply_to=(net8, std8))[0]

@@ -16,6 +16,14 @@ the held-out fold. The held-out predictions of all folds together are scored lik
 eval`` (every real sample is predicted by a model that never saw it), with the analytic baseline
 beside them. ``--predictions-out F.npz`` keeps them (pose, predicted sigma, analytic pose, truth,
 camera count, fold) for calibrating the hybrid estimator (``superbody calibrate-hybrid``).
+
+``--temporal`` also gives the live system's figures on the cross-validation: each fold's model
+is exported as ``superbody train`` writes it, given the hybrid calibration fitted on the other
+folds' held-out predictions (``models.hybrid.fit_calibration``), and the whole recording is
+replayed through the host's aggregator with it (``models.temporal.replay``: tracker, estimator,
+filter, as ``superbody eval --temporal``); the fold's own samples are scored on what the host
+publishes at their capture times. Every sample is thus scored on a live host whose model and
+calibration never saw it, with the network alone, the hybrid, and geometry alone beside them.
 """
 
 from __future__ import annotations
@@ -25,6 +33,7 @@ import dataclasses
 import json
 import logging
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -80,7 +89,7 @@ def spatial_folds(xy: NDArray, folds: int, buffer_m: float = 0.3, seed: int = 0)
 
 
 def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = None, progress: bool = False,
-                  split: str = "time", buffer_m: float = 0.3, int8: bool = False) -> dict:
+                  split: str = "time", buffer_m: float = 0.3, int8: bool = False, temporal: bool = False) -> dict:
     """Train one model per fold and score the held-out predictions.
 
     With ``int8``, each fold's model is also exported and quantised as ``superbody train``
@@ -89,13 +98,17 @@ def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = N
     samples through onnxruntime: ``"predictions_int8"``, ``"std_int8"`` and a ``"model int8"``
     report, the int8 figure on data no fold model saw.
 
+    With ``temporal``, the live figures (module docstring): ``"temporal_network"``,
+    ``"temporal_hybrid"`` and ``"temporal_analytic"`` poses, ``"hybrid"`` (the per-frame
+    leave-one-fold-out hybrid) and a report for each.
+
     Returns:
         ``{"folds": [...], "reports": {"model": report, "analytic": report}, "predictions",
         "std", "analytic", ...}`` with reports as ``models.evaluate.summarise`` gives them.
     """
     from superbody.host.analytic import AnalyticEstimator
     from superbody.models.evaluate import predict, score
-    from superbody.models.wtf import TRUTH_OFFSET_M, load_wtf
+    from superbody.models.wtf import TRUTH_OFFSET_M, load_wtf_raw, to_samples
 
     if not cfg.real:
         raise ValueError("cross-validation needs real data (--real)")
@@ -103,7 +116,8 @@ def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = N
     site = load_site(cfg.site)
     if split not in SPLITS:
         raise ValueError(f"unknown split {split!r}; valid splits: {', '.join(SPLITS)}")
-    samples = load_wtf(cfg.real, site=site if cfg.use_3d else None)
+    raw = load_wtf_raw(cfg.real)
+    samples = to_samples(raw, site if cfg.use_3d else None)
     if split == "time":
         blocks = [(np.arange(a, b), np.arange(a, b)) for a, b in fold_ranges(len(samples), folds)]
     else:
@@ -114,38 +128,66 @@ def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = N
     std8 = np.full((len(samples), 3), np.nan)
     fold_of = np.zeros(len(samples), np.int64)
     info = []
-    for k, (held, excluded) in enumerate(blocks):
-        fold_cfg = dataclasses.replace(cfg, real_exclude=None, real_holdout=tuple(int(i) for i in excluded), seed=cfg.seed + k)
-        log.info("fold %d/%d: holding out %d samples (%d kept from training)", k + 1, folds, len(held), len(excluded))
-        result = train(fold_cfg, progress=progress)
-        est = _TorchEstimator(result.model, result.spec, site)
-        pred[held], std[held] = est.estimate_with_std([samples[i].views for i in held])
-        if int8:
-            pred8[held], std8[held] = _int8_estimates(result, fold_cfg, site, [samples[i].views for i in held])
-        fold_of[held] = k + 1
-        info.append({"fold": k + 1, "held_out": int(len(held)), "excluded": int(len(excluded)), "best_epoch": result.best_epoch,
-                     "minutes": round(result.minutes, 2)})
-    baseline = predict(samples, AnalyticEstimator(site))
+    fp32_models: dict[int, str] = {}  # fold -> its exported fp32 model (temporal)
+    with tempfile.TemporaryDirectory(prefix="superbody-crossval-") as tmp:
+        for k, (held, excluded) in enumerate(blocks):
+            fold_cfg = dataclasses.replace(cfg, real_exclude=None, real_holdout=tuple(int(i) for i in excluded), seed=cfg.seed + k)
+            log.info("fold %d/%d: holding out %d samples (%d kept from training)", k + 1, folds, len(held), len(excluded))
+            result = train(fold_cfg, progress=progress)
+            est = _TorchEstimator(result.model, result.spec, site)
+            pred[held], std[held] = est.estimate_with_std([samples[i].views for i in held])
+            if int8 or temporal:
+                from superbody.host.estimator import OnnxEstimator
+                from superbody.models.train import save
+
+                paths = save(result, fold_cfg, tmp, f"fold{k + 1}")  # as superbody train writes it
+                fp32_models[k + 1] = paths["fp32"]
+                if int8:  # the int8 model's poses and raw 1-sigmas (no std scale in its metadata yet)
+                    pred8[held], std8[held] = OnnxEstimator(paths["int8"], site).estimate_with_std([samples[i].views for i in held])
+            fold_of[held] = k + 1
+            info.append({"fold": k + 1, "held_out": int(len(held)), "excluded": int(len(excluded)), "best_epoch": result.best_epoch,
+                         "minutes": round(result.minutes, 2)})
+        baseline = predict(samples, AnalyticEstimator(site))
+        live = _temporal(raw, samples, site, pred, std, fold_of, fp32_models, offset) if temporal else {}
     scored = {"model": pred, **({"model int8": pred8} if int8 else {}), "analytic": baseline}
+    if temporal:
+        scored = {"model": pred, "hybrid": live["hybrid"], **({"model int8": pred8} if int8 else {}),
+                  "model temporal": live["temporal_network"], "hybrid temporal": live["temporal_hybrid"],
+                  "analytic": baseline, "analytic temporal": live["temporal_analytic"]}
     out = {"folds": info, "reports": score(samples, scored, offset), "truth_offset_m": offset,
            "predictions": pred, "std": std, "analytic": baseline, "fold": fold_of, "split": split,
-           "truth": np.array([s.truth for s in samples]), "views": np.array([len(s.views) for s in samples])}
+           "truth": np.array([s.truth for s in samples]), "views": np.array([len(s.views) for s in samples]), **live}
     if int8:
         out.update(predictions_int8=pred8, std_int8=std8)
     return out
 
 
-def _int8_estimates(result, cfg: TrainConfig, site, view_sets) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """A fold's model written as ``superbody train`` writes it (fp32 and int8 ONNX), and the int8
-    model's poses and raw 1-sigmas (no std scale in its metadata) for ``view_sets``."""
-    import tempfile
-
+def _temporal(raw, samples, site, pred: NDArray, std: NDArray, fold_of: NDArray, fp32_models: dict[int, str], offset: float) -> dict:
+    """The live system on the cross-validation (module docstring): per fold, its fp32 model with the
+    hybrid calibration of the other folds, the whole recording replayed through the aggregator,
+    the fold's samples taken from what it publishes."""
+    from superbody.host.analytic import AnalyticEstimator
     from superbody.host.estimator import OnnxEstimator
-    from superbody.models.train import save
+    from superbody.host.hybrid import HybridEstimator
+    from superbody.models import hybrid
+    from superbody.models.temporal import replay, view_stamps
+    from superbody.models.wtf import truth_to_torso
 
-    with tempfile.TemporaryDirectory() as tmp:
-        paths = save(result, cfg, tmp, "fold")
-        return OnnxEstimator(paths["int8"], site).estimate_with_std(view_sets)
+    stamps = view_stamps(raw)
+    truth = truth_to_torso(np.array([s.truth for s in samples]), offset)
+    cams = np.array([len(s.views) for s in samples])
+    analytic, pair = hybrid.analytic_with_pairs(samples, site)
+    lofo = hybrid.leave_one_fold_out(pred, std, analytic, pair, truth, cams, fold_of, site)[0]
+    net_live, hyb_live = np.full_like(pred, np.nan), np.full_like(pred, np.nan)
+    for k, path in fp32_models.items():
+        held, train = fold_of == k, fold_of != k
+        hybrid.write_calibration(path, *hybrid.fit_calibration(pred[train], std[train], analytic[train], pair[train], truth[train], cams[train]))
+        net = OnnxEstimator(path, site)  # the host's --estimator onnx on it: the calibrated sigmas feed the filter
+        net_live[held] = replay(samples, stamps, pred, site, net, f"onnx:fold{k}").poses[held]
+        hyb_live[held] = replay(samples, stamps, lofo, site, HybridEstimator(net, site), f"hybrid:fold{k}").poses[held]
+        log.info("fold %d: replayed through the host aggregator", k)
+    geo_live = replay(samples, stamps, analytic, site, AnalyticEstimator(site), "analytic").poses
+    return {"hybrid": lofo, "temporal_network": net_live, "temporal_hybrid": hyb_live, "temporal_analytic": geo_live}
 
 
 class _TorchEstimator:
@@ -187,14 +229,15 @@ def _run(args: argparse.Namespace) -> int:
         print(f"superbody crossval: error: {e}", file=sys.stderr)
         return 2
     out = crossvalidate(cfg, args.folds, args.truth_offset, progress=sys.stderr.isatty() and not args.no_progress,
-                        split=args.split, buffer_m=args.buffer, int8=args.int8)
+                        split=args.split, buffer_m=args.buffer, int8=args.int8, temporal=args.temporal)
     print(f"blocked {args.folds}-fold cross-validation ({args.split} blocks) on {cfg.real} ({cfg.arch}, {cfg.variant}{', 3D' if cfg.use_3d else ''}):")
     print(format_table(out["reports"], out["truth_offset_m"]))
     if args.json_out:
         doc = {"config": cfg.to_json(), "split": args.split, "folds": out["folds"], "truth_offset_m": out["truth_offset_m"], **out["reports"]}
         Path(args.json_out).write_text(json.dumps(doc, indent=1) + "\n")
     if args.predictions_out:
-        keys = ("predictions", "std", "analytic", "truth", "views", "fold") + (("predictions_int8", "std_int8") if args.int8 else ())
+        keys = (("predictions", "std", "analytic", "truth", "views", "fold") + (("predictions_int8", "std_int8") if args.int8 else ())
+                + (("hybrid", "temporal_network", "temporal_hybrid", "temporal_analytic") if args.temporal else ()))
         np.savez(args.predictions_out, **{k: out[k] for k in keys},
                  truth_offset_m=out["truth_offset_m"], split=args.split)
     return 0
@@ -208,6 +251,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--buffer", type=float, default=0.3, help="--split space: also keep samples this close (m) to the held-out region out of training")
     p.add_argument("--int8", action="store_true",
                    help="also quantise each fold's model to int8 as train writes it and score its held-out predictions (kept in --predictions-out)")
+    p.add_argument("--temporal", action="store_true",
+                   help="also the live system's figures: each fold's model, calibrated as a hybrid on the other folds, "
+                        "replayed through the host's aggregator as eval --temporal does (network, hybrid and geometry)")
     p.add_argument("--predictions-out", help="write the held-out predictions, sigmas, analytic poses and truth (.npz)")
     p.add_argument("--truth-offset", type=float, default=None, help="chest-tracker offset of the file's truth, metres (default: the dataset's)")
     p.add_argument("--json-out", help="write the reports as JSON")

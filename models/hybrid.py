@@ -39,7 +39,7 @@ from superbody.host.estimator import META_STD_SCALE
 from superbody.host.hybrid import META_HYBRID, HybridCalibration, combine, fuse
 from superbody.models.samples import Sample
 
-__all__ = ["robust_sigma", "fit_std_scale", "scaled_std", "fit_trust", "TRUST_GRID", "fit_analytic", "hybrid_poses", "leave_one_fold_out", "sigma_coverage", "write_calibration"]
+__all__ = ["robust_sigma", "fit_std_scale", "scaled_std", "fit_trust", "TRUST_GRID", "fit_analytic", "fit_calibration", "hybrid_poses", "leave_one_fold_out", "sigma_coverage", "write_calibration"]
 
 _MEDIAN_ABS_Z: Final[float] = 0.6745  # median of |z| for z ~ N(0, 1)
 
@@ -164,6 +164,16 @@ def fit_trust(net: NDArray, net_std: NDArray, analytic: NDArray, pair: NDArray, 
     return replace(calibration, net_trust=tuple(rows))
 
 
+def fit_calibration(net: NDArray, net_std: NDArray, analytic: NDArray, pair: NDArray, truth: NDArray, cameras: NDArray,
+                    source: str = "") -> tuple[NDArray[np.float64], HybridCalibration]:
+    """The whole fit on held-out predictions: the network's sigma scale, then the geometry's
+    sigmas and bias, then the trust (on the scaled sigmas). Returns ``(std_scale, calibration)``,
+    what ``write_calibration`` stores."""
+    scale = fit_std_scale(net, net_std, truth, cameras)
+    cal = fit_analytic(analytic, pair, truth, cameras, source=source)
+    return scale, fit_trust(net, scaled_std(net_std, scale, cameras), analytic, pair, truth, cameras, cal)
+
+
 def leave_one_fold_out(
     net: NDArray, net_std: NDArray, analytic: NDArray, pair: NDArray, truth: NDArray, cameras: NDArray, fold: NDArray, site: Site,
     apply_to: tuple[NDArray, NDArray] | None = None,
@@ -180,9 +190,7 @@ def leave_one_fold_out(
     source = np.full(len(net), "", dtype=object)
     for k in np.unique(fold):
         test, train = fold == k, fold != k
-        scale = fit_std_scale(net[train], net_std[train], truth[train], cameras[train])
-        cal = fit_analytic(analytic[train], pair[train], truth[train], cameras[train])
-        cal = fit_trust(net[train], scaled_std(net_std[train], scale, cameras[train]), analytic[train], pair[train], truth[train], cameras[train], cal)
+        scale, cal = fit_calibration(net[train], net_std[train], analytic[train], pair[train], truth[train], cameras[train])
         pose[test], std[test], source[test] = hybrid_poses(use[test], scaled_std(use_std[test], scale, cameras[test]), analytic[test],
                                                            pair[test], cameras[test], cal, site)
     return pose, std, source.astype(str)
