@@ -106,8 +106,10 @@ def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = N
         ``{"folds": [...], "reports": {"model": report, "analytic": report}, "predictions",
         "std", "analytic", ...}`` with reports as ``models.evaluate.summarise`` gives them.
     """
-    from superbody.host.analytic import AnalyticEstimator
-    from superbody.models.evaluate import predict, score
+    from superbody.host.estimator import OnnxEstimator
+    from superbody.models.evaluate import score
+    from superbody.models.hybrid import analytic_with_pairs
+    from superbody.models.train import save
     from superbody.models.wtf import TRUTH_OFFSET_M, load_wtf_raw, to_samples
 
     if not cfg.real:
@@ -137,9 +139,6 @@ def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = N
             est = _TorchEstimator(result.model, result.spec, site)
             pred[held], std[held] = est.estimate_with_std([samples[i].views for i in held])
             if int8 or temporal:
-                from superbody.host.estimator import OnnxEstimator
-                from superbody.models.train import save
-
                 paths = save(result, fold_cfg, tmp, f"fold{k + 1}")  # as superbody train writes it
                 fp32_models[k + 1] = paths["fp32"]
                 if int8:  # the int8 model's poses and raw 1-sigmas (no std scale in its metadata yet)
@@ -147,13 +146,11 @@ def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = N
             fold_of[held] = k + 1
             info.append({"fold": k + 1, "held_out": int(len(held)), "excluded": int(len(excluded)), "best_epoch": result.best_epoch,
                          "minutes": round(result.minutes, 2)})
-        baseline = predict(samples, AnalyticEstimator(site))
-        live = _temporal(raw, samples, site, pred, std, fold_of, fp32_models, offset) if temporal else {}
-    scored = {"model": pred, **({"model int8": pred8} if int8 else {}), "analytic": baseline}
-    if temporal:
-        scored = {"model": pred, "hybrid": live["hybrid"], **({"model int8": pred8} if int8 else {}),
-                  "model temporal": live["temporal_network"], "hybrid temporal": live["temporal_hybrid"],
-                  "analytic": baseline, "analytic temporal": live["temporal_analytic"]}
+        baseline, pair = analytic_with_pairs(samples, site)
+        live = _temporal(raw, samples, site, pred, std, baseline, pair, fold_of, fp32_models, offset) if temporal else {}
+    scored = {"model": pred, "hybrid": live.get("hybrid"), "model int8": pred8 if int8 else None, "model temporal": live.get("temporal_network"),
+              "hybrid temporal": live.get("temporal_hybrid"), "analytic": baseline, "analytic temporal": live.get("temporal_analytic")}
+    scored = {name: p for name, p in scored.items() if p is not None}  # what was run, in table order
     out = {"folds": info, "reports": score(samples, scored, offset), "truth_offset_m": offset,
            "predictions": pred, "std": std, "analytic": baseline, "fold": fold_of, "split": split,
            "truth": np.array([s.truth for s in samples]), "views": np.array([len(s.views) for s in samples]), **live}
@@ -162,7 +159,8 @@ def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = N
     return out
 
 
-def _temporal(raw, samples, site, pred: NDArray, std: NDArray, fold_of: NDArray, fp32_models: dict[int, str], offset: float) -> dict:
+def _temporal(raw, samples, site, pred: NDArray, std: NDArray, analytic: NDArray, pair: NDArray, fold_of: NDArray,
+              fp32_models: dict[int, str], offset: float) -> dict:
     """The live system on the cross-validation (module docstring): per fold, its fp32 model with the
     hybrid calibration of the other folds, the whole recording replayed through the aggregator,
     the fold's samples taken from what it publishes."""
@@ -176,7 +174,6 @@ def _temporal(raw, samples, site, pred: NDArray, std: NDArray, fold_of: NDArray,
     stamps = view_stamps(raw)
     truth = truth_to_torso(np.array([s.truth for s in samples]), offset)
     cams = np.array([len(s.views) for s in samples])
-    analytic, pair = hybrid.analytic_with_pairs(samples, site)
     lofo = hybrid.leave_one_fold_out(pred, std, analytic, pair, truth, cams, fold_of, site)[0]
     net_live, hyb_live = np.full_like(pred, np.nan), np.full_like(pred, np.nan)
     for k, path in fp32_models.items():
