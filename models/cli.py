@@ -70,7 +70,9 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
             "From a cross-validation's held-out predictions (superbody crossval --predictions-out) and the real "
             "file: scale the network's predicted sigmas to its real errors, measure the analytic estimator's "
             "sigmas per camera count, score the hybrid on the cross-validation (each fold calibrated on the "
-            "others), and write the calibration into each --model (metadata pose.std_scale, hybrid.calibration)."
+            "others), and write the calibration into each --model (metadata pose.std_scale, hybrid.calibration). "
+            "An int8 model (metadata quant.format) gets the calibration fitted on the int8 fold models' held-out "
+            "predictions when every --cv file has them (superbody crossval --int8), else the fp32 one."
         ),
     )
     h.add_argument("--cv", type=Path, action="append", required=True, metavar="CV.npz",
@@ -165,6 +167,22 @@ def _run_calibrate_from_dataset(args: argparse.Namespace) -> int:
     return 0
 
 
+def _is_quantised(model: Path) -> bool:
+    """Whether an ONNX model is an int8 export (``models.export`` writes ``quant.format`` into it).
+
+    Raises:
+        ValueError: the file is not an ONNX model.
+    """
+    import onnx
+    from google.protobuf.message import DecodeError
+
+    try:
+        proto = onnx.load(str(model), load_external_data=False)
+    except DecodeError as e:
+        raise ValueError(f"not an ONNX model ({e})") from None
+    return any(p.key == "quant.format" for p in proto.metadata_props)
+
+
 def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -201,12 +219,18 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
         return combine(np.stack([m[f"predictions{key}"] for m in members]), np.stack([m[f"std{key}"] for m in members]))
 
     net, std = combined("")
-    # int8: each fold model quantised as train quantises (crossval --int8), fused with the fp32 calibration
+    # int8: each fold model quantised as train quantises (crossval --int8); its errors are not the
+    # fp32 model's, so the int8 model gets its own calibration, fitted the same way on them
     has_int8 = all("predictions_int8" in m for m in members)
     net8, std8 = combined("_int8") if has_int8 else (None, None)
+    quantised = {}
     for m in args.model:
         if not m.is_file():
             return _fail(command, f"--model {m}: no such file")
+        try:
+            quantised[m] = _is_quantised(m)
+        except ValueError as e:
+            return _fail(command, f"--model {m}: {e}")
     truth = truth_to_torso(np.array([s.truth for s in samples]), offset)
     cams = np.array([len(s.views) for s in samples])
     analytic, pair = hybrid.analytic_with_pairs(samples, site)
@@ -215,7 +239,9 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
             f"{args.dataset.name}, {len(samples)} samples; network sigmas from {' + '.join(p.name for p in args.cv)}"))
         lofo, lofo_std, source = hybrid.leave_one_fold_out(net, std, analytic, pair, truth, cams, fold, site)
         if has_int8:
-            lofo8 = hybrid.leave_one_fold_out(net, std, analytic, pair, truth, cams, fold, site, apply_to=(net8, std8))[0]
+            scale8, cal8 = hybrid.fit_calibration(net8, std8, analytic, pair, truth, cams, source=(
+                f"{args.dataset.name}, {len(samples)} samples; int8 network sigmas from {' + '.join(p.name for p in args.cv)}"))
+            lofo8 = hybrid.leave_one_fold_out(net8, std8, analytic, pair, truth, cams, fold, site)[0]
     except ValueError as e:
         return _fail(command, str(e))
     scored = {"hybrid (CV)": lofo, "network (CV)": net}
@@ -242,13 +268,20 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
         print("hybrid int8 vs fp32 on the cross-validation: " + ", ".join(f"{k} {v:+.1f}%" for k, v in int8_change.items()))
     else:
         print("no int8 figure: not every --cv file has int8 predictions (superbody crossval --int8)")
+    if has_int8:
+        print("int8 trust in the network (x, y, yaw) by cameras: " + "; ".join(f"{k}: {', '.join(f'{v:g}' for v in row)}" for k, row in zip((1, 2, 3), cal8.net_trust)))
     for m in args.model:
-        hybrid.write_calibration(m, scale, cal)
-        print(f"wrote the calibration into {m}")
+        if quantised[m] and has_int8:
+            hybrid.write_calibration(m, scale8, cal8)
+            print(f"wrote the int8 calibration into {m}")
+        else:
+            hybrid.write_calibration(m, scale, cal)
+            print(f"wrote the calibration into {m}" + (" (int8 model, but no int8 predictions in --cv: the fp32 calibration)" if quantised[m] else ""))
     if args.json_out is not None:
         doc = {"std_scale": scale.tolist(), "calibration": json.loads(cal.to_json()), "coverage": coverage,
                "sources": {s: int((source == s).sum()) for s in ("hybrid", "onnx", "analytic")}, "reports": reports, "truth_offset_m": offset,
-               "int8_vs_fp32_percent": int8_change}
+               "int8_vs_fp32_percent": int8_change,
+               "int8": {"std_scale": scale8.tolist(), "calibration": json.loads(cal8.to_json())} if has_int8 else None}
         args.json_out.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
         print(f"wrote {args.json_out}")
     return 0

@@ -91,16 +91,22 @@ def test_calibrate_hybrid_writes_the_model_that_the_host_then_runs_as_hybrid(tin
     drift = z["predictions_int8"] - z["predictions"]
     drift[:, 2] = np.angle(np.exp(1j * drift[:, 2]))  # yaw wrapped
     assert 0 < np.abs(drift).max() < 0.5  # int8 drifts from fp32, a little
-    model = tmp_path / "m.int8.onnx"
+    model, model32 = tmp_path / "m.int8.onnx", tmp_path / "m.fp32.onnx"
     shutil.copy(tiny / "tiny.int8.onnx", model)
-    r = _cli("calibrate", "hybrid", "--cv", str(npz), "--dataset", str(dev_json), "--model", str(model), "--json-out", str(tmp_path / "h.json"))
+    shutil.copy(tiny / "tiny.fp32.onnx", model32)
+    r = _cli("calibrate", "hybrid", "--cv", str(npz), "--dataset", str(dev_json), "--model", str(model32), "--model", str(model),
+             "--json-out", str(tmp_path / "h.json"))
     assert r.returncode == 0, r.stderr[-2000:]
     assert "trust in the network" in r.stdout and "hybrid (CV)" in r.stdout
     doc = json.loads((tmp_path / "h.json").read_text())
     assert len(doc["std_scale"]) == 3 and sum(doc["sources"].values()) == 225
     assert "hybrid int8 (CV)" in doc["reports"] and set(doc["int8_vs_fp32_percent"]) == {"x MAE", "y MAE", "yaw MAE"}
-    meta = {p.key: p.value for p in onnx.load(str(model)).metadata_props}
-    assert "hybrid.calibration" in meta and "pose.std_scale" in meta
+    # each model carries the calibration fitted on its own kind's held-out predictions
+    for path, fitted in ((model32, doc), (model, doc["int8"])):
+        meta = {p.key: p.value for p in onnx.load(str(path)).metadata_props}
+        assert json.loads(meta["hybrid.calibration"]) == fitted["calibration"], path
+        np.testing.assert_allclose(json.loads(meta["pose.std_scale"]), fitted["std_scale"], atol=1e-5)
+    assert doc["int8"]["std_scale"] != doc["std_scale"]  # the int8 predictions' errors are their own
     r = _cli("eval", "--dataset", str(dev_json), "--model", str(model))
     assert r.returncode == 0, r.stderr[-2000:]
     assert "m.int8.onnx (network)" in r.stdout  # the hybrid is scored beside its network alone
