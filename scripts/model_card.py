@@ -98,7 +98,7 @@ def _cv_section(title: str, text: str, doc: dict | None) -> list[str]:
     change = doc.get("int8_vs_fp32_percent")
     if change:
         L += ["", "Hybrid int8 against fp32 on this cross-validation (each fold's model quantised as `superbody train` quantises, the shipped scheme and keep-list with ranges from the fold's training graphs: `superbody crossval --int8`; "
-              + ("the int8 hybrid calibrated on the int8 predictions of the other folds, as the shipped int8 model is on all of them" if doc.get("int8") else "the int8 predictions fused with the fp32 calibration")
+              + ("the int8 hybrid calibrated on the int8 predictions of the other folds, as `calibrate hybrid` calibrates an int8 model" if doc.get("int8") else "the int8 predictions fused with the fp32 calibration")
               + "): " + ", ".join(f"{k} {v:+.1f}%" for k, v in change.items()) + "."]
     L += ["", *_by_cameras([(n, x["by_cameras"]) for n, x in rows if n != "network alone int8 (CV)"])]
     s = doc.get("sources", {})
