@@ -218,11 +218,10 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
     def combined(key: str):  # the members' held-out predictions combined as the ensemble combines them
         return combine(np.stack([m[f"predictions{key}"] for m in members]), np.stack([m[f"std{key}"] for m in members]))
 
-    net, std = combined("")
     # int8: each fold model quantised as train quantises (crossval --int8); its errors are not the
     # fp32 model's, so the int8 model gets its own calibration, fitted the same way on them
-    has_int8 = all("predictions_int8" in m for m in members)
-    net8, std8 = combined("_int8") if has_int8 else (None, None)
+    kinds = {"fp32": combined("")} | ({"int8": combined("_int8")} if all("predictions_int8" in m for m in members) else {})
+    has_int8 = "int8" in kinds
     quantised = {}
     for m in args.model:
         if not m.is_file():
@@ -235,18 +234,16 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
     cams = np.array([len(s.views) for s in samples])
     analytic, pair = hybrid.analytic_with_pairs(samples, site)
     try:
-        scale, cal = hybrid.fit_calibration(net, std, analytic, pair, truth, cams, source=(
-            f"{args.dataset.name}, {len(samples)} samples; network sigmas from {' + '.join(p.name for p in args.cv)}"))
-        lofo, lofo_std, source = hybrid.leave_one_fold_out(net, std, analytic, pair, truth, cams, fold, site)
-        if has_int8:
-            scale8, cal8 = hybrid.fit_calibration(net8, std8, analytic, pair, truth, cams, source=(
-                f"{args.dataset.name}, {len(samples)} samples; int8 network sigmas from {' + '.join(p.name for p in args.cv)}"))
-            lofo8 = hybrid.leave_one_fold_out(net8, std8, analytic, pair, truth, cams, fold, site)[0]
+        fits = {k: hybrid.fit_calibration(n, sd, analytic, pair, truth, cams, source=(
+                    f"{args.dataset.name}, {len(samples)} samples; {'int8 ' if k == 'int8' else ''}network sigmas from "
+                    f"{' + '.join(p.name for p in args.cv)}")) for k, (n, sd) in kinds.items()}
+        lofos = {k: hybrid.leave_one_fold_out(n, sd, analytic, pair, truth, cams, fold, site) for k, (n, sd) in kinds.items()}
     except ValueError as e:
         return _fail(command, str(e))
+    (net, std), (scale, cal), (lofo, lofo_std, source) = kinds["fp32"], fits["fp32"], lofos["fp32"]
     scored = {"hybrid (CV)": lofo, "network (CV)": net}
     if has_int8:
-        scored.update({"hybrid int8 (CV)": lofo8, "network int8 (CV)": net8})
+        scored.update({"hybrid int8 (CV)": lofos["int8"][0], "network int8 (CV)": kinds["int8"][0]})
     reports = score(samples, {**scored, "analytic": analytic}, offset)
     coverage = {"network": hybrid.sigma_coverage(net, hybrid.scaled_std(std, scale, cams), truth),
                 "hybrid": hybrid.sigma_coverage(lofo, lofo_std, truth)}
@@ -269,19 +266,17 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
     else:
         print("no int8 figure: not every --cv file has int8 predictions (superbody crossval --int8)")
     if has_int8:
-        print("int8 trust in the network (x, y, yaw) by cameras: " + "; ".join(f"{k}: {', '.join(f'{v:g}' for v in row)}" for k, row in zip((1, 2, 3), cal8.net_trust)))
+        print("int8 trust in the network (x, y, yaw) by cameras: " + "; ".join(f"{k}: {', '.join(f'{v:g}' for v in row)}" for k, row in zip((1, 2, 3), fits["int8"][1].net_trust)))
     for m in args.model:
-        if quantised[m] and has_int8:
-            hybrid.write_calibration(m, scale8, cal8)
-            print(f"wrote the int8 calibration into {m}")
-        else:
-            hybrid.write_calibration(m, scale, cal)
-            print(f"wrote the calibration into {m}" + (" (int8 model, but no int8 predictions in --cv: the fp32 calibration)" if quantised[m] else ""))
+        kind = "int8" if quantised[m] and has_int8 else "fp32"
+        hybrid.write_calibration(m, *fits[kind])
+        print(f"wrote the {'int8 ' if kind == 'int8' else ''}calibration into {m}"
+              + (" (int8 model, but no int8 predictions in --cv: the fp32 calibration)" if quantised[m] and kind == "fp32" else ""))
     if args.json_out is not None:
         doc = {"std_scale": scale.tolist(), "calibration": json.loads(cal.to_json()), "coverage": coverage,
                "sources": {s: int((source == s).sum()) for s in ("hybrid", "onnx", "analytic")}, "reports": reports, "truth_offset_m": offset,
                "int8_vs_fp32_percent": int8_change,
-               "int8": {"std_scale": scale8.tolist(), "calibration": json.loads(cal8.to_json())} if has_int8 else None}
+               "int8": {"std_scale": fits["int8"][0].tolist(), "calibration": json.loads(fits["int8"][1].to_json())} if has_int8 else None}
         args.json_out.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
         print(f"wrote {args.json_out}")
     return 0
