@@ -51,8 +51,8 @@ _MEDIAN_ABS_Z: Final[float] = 0.6745  # median of |z| for z ~ N(0, 1)
 DEBIAS: Final[tuple[bool, bool, bool]] = (False, False, True)
 """Which axes (x, y, yaw) of the analytic pose get their median error on real data removed
 (``HybridCalibration.analytic_bias``). Yaw: on dev.json the shoulder line reads a few degrees
-counter-clockwise of the ground truth's heading (median +4 deg with three cameras) in four of
-its five floor regions. Not position: the geometry's position error changes sign from one region
+counter-clockwise of the ground truth's heading (median +4 deg with two and with three cameras;
+positive in every floor region that three cameras saw, and in four of five with two). Not position: the geometry's position error changes sign from one region
 to the next (x medians -42 to +114 mm), so an offset measured in some places misleads in others;
 removing it lowered the spatial cross-validation's error with one and three cameras and raised
 it with two. (This choice was made on that cross-validation, so it has seen dev.json.)"""
