@@ -11,6 +11,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from superbody.edge.site import load_site  # noqa: E402
+from superbody.host.hybrid import fuse  # noqa: E402
 from superbody.models.crossval import spatial_folds  # noqa: E402
 from superbody.models.hybrid import TRUST_GRID, fit_analytic, fit_calibration, fit_std_scale, fit_trust, hybrid_poses, leave_one_fold_out, robust_sigma, scaled_std, sigma_coverage  # noqa: E402
 from superbody.models.nets import pose_nll  # noqa: E402
@@ -93,6 +94,33 @@ def test_trust_is_earned_per_camera_count_and_per_axis():
     assert min(p1, q1, y1) >= 0.5
     assert p3 == 0.0 and q3 >= 0.5 and y3 >= 1  # each axis on its own: the biased x goes to geometry, y does not
     assert cal.net_trust[1] == (1.0, 1.0, 1.0) and set(cal.net_trust[0]) <= set(TRUST_GRID)  # no 2-camera samples: the default
+
+
+def test_position_trust_needs_a_gain_beyond_the_noise_and_yaw_does_not():
+    """Two cameras, 60 samples; the network's errors are geometry's own (yaw: 95% of it) plus a
+    little noise of their own, so fusing wins by chance or by a little. On these samples the
+    lowest error of every axis is at some trust above 0: position stays geometry's (trust 0),
+    yaw takes its lowest. Three cameras, where the network is five times surer and
+    independent: position trusts it."""
+    rng = np.random.default_rng(0)
+    n = 60
+    cams = np.repeat([2, 3], n)
+    truth = np.column_stack([rng.uniform(-1, 1, (2 * n, 2)), rng.uniform(-3, 3, 2 * n)])
+    geo_err = rng.normal(0, 1, (2 * n, 3)) * [0.08, 0.08, 0.1]
+    geo = truth + geo_err
+    net_err = np.where(cams[:, None] == 2, geo_err * [1, 1, 0.95] + rng.normal(0, 0.02, (2 * n, 3)),
+                       rng.normal(0, 1, (2 * n, 3)) * [0.016, 0.016, 0.02])
+    net = truth + net_err
+    net_std = np.tile([0.08, 0.08, 0.1], (2 * n, 1))
+    pair = np.ones(2 * n, bool)
+    geo_cal = fit_analytic(geo, pair, truth, cams, debias=(False, False, False))
+    cal = fit_trust(net, net_std, geo, pair, truth, cams, geo_cal)
+    two = cams == 2
+    g = geo_cal.analytic_sigmas(cams[two], pair[two])
+    mae = np.array([np.abs(fuse(net[two], net_std[two], geo[two], g, t)[0] - truth[two]).mean(0) for t in TRUST_GRID])  # (T, 3)
+    assert (np.argmin(mae, axis=0) > 0).all()  # the plain minimum would trust the network on every axis
+    assert cal.net_trust[1] == (0.0, 0.0, TRUST_GRID[int(np.argmin(mae[:, 2]))])
+    assert min(cal.net_trust[2]) >= 1.0
 
 
 def test_hybrid_beats_both_when_errors_are_independent():
