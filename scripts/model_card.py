@@ -155,7 +155,9 @@ def main(out_dir: Path, card: Path) -> int:
          "by inverse variance; the network's sigmas are scaled per camera count to its errors on held-out real data, the geometry's sigmas are "
          "measured per camera count on dev.json (as is the geometry's typical yaw error, a few degrees, which is subtracted from its yaw), "
          "and a trust factor per camera count and axis (fitted on held-out predictions) says how much of "
-         "the network's weight its real errors have earned. Outside the floor it was trained on, the host uses geometry. Each published person "
+         "the network's weight its real errors have earned (for position, only what beats geometry by more than a standard error of that "
+         "fit). The geometry's yaw takes each shoulder and hip line from the cameras that saw both of its ends (`host/analytic.py`). "
+         "Outside the floor it was trained on, the host uses geometry. Each published person "
          "says which (`estimator`: hybrid, onnx, analytic), and the filter takes the fused sigma as its measurement noise.",
          "- `site-independent.int8.onnx` / `.fp32.onnx`: the same network on world-ray features (any camera layout, up to 4 views per person), "
          "trained only in random simulated rooms; no hybrid calibration (it has seen no real data).",
