@@ -117,7 +117,12 @@ def test_position_trust_needs_a_gain_beyond_the_noise_and_yaw_does_not():
     cal = fit_trust(net, net_std, geo, pair, truth, cams, geo_cal)
     two = cams == 2
     g = geo_cal.analytic_sigmas(cams[two], pair[two])
-    mae = np.array([np.abs(fuse(net[two], net_std[two], geo[two], g, t)[0] - truth[two]).mean(0) for t in TRUST_GRID])  # (T, 3)
+    def mae_of(t: float) -> np.ndarray:
+        d = fuse(net[two], net_std[two], geo[two], g, t)[0] - truth[two]
+        d[:, 2] = np.angle(np.exp(1j * d[:, 2]))  # yaw error wrapped
+        return np.abs(d).mean(0)
+
+    mae = np.array([mae_of(t) for t in TRUST_GRID])  # (T, 3)
     assert (np.argmin(mae, axis=0) > 0).all()  # the plain minimum would trust the network on every axis
     assert cal.net_trust[1] == (0.0, 0.0, TRUST_GRID[int(np.argmin(mae[:, 2]))])
     assert min(cal.net_trust[2]) >= 1.0
