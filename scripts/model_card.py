@@ -239,7 +239,9 @@ def main(out_dir: Path, card: Path) -> int:
           "`superbody crossval --split space --temporal`, one member at a time (an ensemble cannot be cross-validated live from its members' "
           "files): each fold's model, with the hybrid calibration fitted on the other folds, runs in the host's aggregator over the whole "
           "recording, and the fold's samples are scored on what it publishes at their capture times. No fold's model or calibration saw the "
-          "samples it is scored on (the design choices noted in the spatial cross-validation above were made on it).", ""]
+          "samples it is scored on (the design choices noted in the spatial cross-validation above were made on it). The host filter's "
+          "acceleration noise (`FilterConfig.accel_std_mps2`, 3 m/s^2) was chosen on simulated recordings (`python benchmarks/filter_tuning.py`), "
+          "not on these figures.", ""]
     L += _live_cv({f"m{k}": _load(out_dir / f"crossval-space-m{k}.json") for k in (1, 2, 3)})
     if demo:
         L += ["", "## On simulation: the demo", "",
