@@ -62,6 +62,8 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     if not 1 <= args.recordings <= 100 or not 1 <= args.duration <= 600:
         p.error(f"--recordings must be in [1, 100] and --duration in [1, 600], got {args.recordings}, {args.duration}")
+    if not args.analytic and not args.model.is_file():
+        p.error(f"--model {args.model}: no such file")
     site = load_site(site_path("wtf-apartment"))
     if args.analytic:
         from superbody.host.analytic import AnalyticEstimator

@@ -28,7 +28,9 @@ def test_filter_tuning_writes_one_row_per_value(tmp_path):
     assert "<- default" in r.stdout and "1/1 replayed" in r.stderr
 
 
-def test_filter_tuning_refuses_a_value_out_of_range():
-    r = subprocess.run([sys.executable, SCRIPT, "--accel", "1,0"], capture_output=True, text=True, timeout=60)
-    assert r.returncode == 2 and "Traceback" not in r.stderr
-    assert "accel_std_mps2 must be in (0.0, 100.0]" in r.stderr
+def test_filter_tuning_refuses_bad_arguments(tmp_path):
+    for args, message in ((["--accel", "1,0"], "accel_std_mps2 must be in (0.0, 100.0]"),
+                          (["--model", str(tmp_path / "nope.onnx")], "nope.onnx: no such file"),
+                          (["--recordings", "0"], "--recordings must be in [1, 100]")):
+        r = subprocess.run([sys.executable, SCRIPT, *args], capture_output=True, text=True, timeout=60)
+        assert r.returncode == 2 and "Traceback" not in r.stderr and message in r.stderr, r.stderr[-1000:]
