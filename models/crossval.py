@@ -24,6 +24,10 @@ replayed through the host's aggregator with it (``models.temporal.replay``: trac
 filter, as ``superbody eval --temporal``); the fold's own samples are scored on what the host
 publishes at their capture times. Every sample is thus scored on a live host whose model and
 calibration never saw it, with the network alone, the hybrid, and geometry alone beside them.
+``--models-out DIR`` (with ``--temporal``) keeps those fold models, ``DIR/fold<k>.fp32.onnx``
+each with its calibration from the other folds, so that a change to the host (tracker, filter,
+set S) can be scored live on the cross-validation again without retraining
+(``models.temporal.replay`` on fold k's samples, ``fold`` in ``--predictions-out``).
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ import argparse
 import dataclasses
 import json
 import logging
+import shutil
 import sys
 import tempfile
 from pathlib import Path
@@ -89,7 +94,8 @@ def spatial_folds(xy: NDArray, folds: int, buffer_m: float = 0.3, seed: int = 0)
 
 
 def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = None, progress: bool = False,
-                  split: str = "time", buffer_m: float = 0.3, int8: bool = False, temporal: bool = False) -> dict:
+                  split: str = "time", buffer_m: float = 0.3, int8: bool = False, temporal: bool = False,
+                  models_out: Path | None = None) -> dict:
     """Train one model per fold and score the held-out predictions.
 
     With ``int8``, each fold's model is also exported and quantised as ``superbody train``
@@ -100,7 +106,8 @@ def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = N
 
     With ``temporal``, the live figures (module docstring): ``"temporal_network"``,
     ``"temporal_hybrid"`` and ``"temporal_analytic"`` poses, ``"hybrid"`` (the per-frame
-    leave-one-fold-out hybrid) and a report for each.
+    leave-one-fold-out hybrid) and a report for each; with ``models_out`` too, each fold's fp32
+    model with that calibration is copied there as ``fold<k>.fp32.onnx``.
 
     Returns:
         ``{"folds": [...], "reports": {"model": report, "analytic": report}, "predictions",
@@ -118,6 +125,8 @@ def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = N
     site = load_site(cfg.site)
     if split not in SPLITS:
         raise ValueError(f"unknown split {split!r}; valid splits: {', '.join(SPLITS)}")
+    if models_out is not None and not temporal:
+        raise ValueError("models_out needs temporal (the fold models are kept with their live calibration)")
     raw = load_wtf_raw(cfg.real)
     samples = to_samples(raw, site if cfg.use_3d else None)
     if split == "time":
@@ -148,6 +157,10 @@ def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = N
                          "minutes": round(result.minutes, 2)})
         baseline, pair = analytic_with_pairs(samples, site)
         live = _temporal(raw, samples, site, pred, std, baseline, pair, fold_of, fp32_models, offset) if temporal else {}
+        if models_out is not None:
+            Path(models_out).mkdir(parents=True, exist_ok=True)
+            for k, path in fp32_models.items():  # each now carries its calibration from the other folds
+                shutil.copyfile(path, Path(models_out) / f"fold{k}.fp32.onnx")
     scored = {"model": pred, "hybrid": live.get("hybrid"), "model int8": pred8 if int8 else None, "model temporal": live.get("temporal_network"),
               "hybrid temporal": live.get("temporal_hybrid"), "analytic": baseline, "analytic temporal": live.get("temporal_analytic")}
     scored = {name: p for name, p in scored.items() if p is not None}  # what was run, in table order
@@ -222,11 +235,14 @@ def _run(args: argparse.Namespace) -> int:
             raise ValueError(f"--init {cfg.init}: no such file")
         if not 0.0 <= args.buffer <= 5.0:
             raise ValueError(f"--buffer must be in [0, 5] metres, got {args.buffer}")
+        if args.models_out is not None and not args.temporal:
+            raise ValueError("--models-out needs --temporal (the fold models are kept with their live calibration)")
     except (ValueError, SiteError) as e:
         print(f"superbody crossval: error: {e}", file=sys.stderr)
         return 2
     out = crossvalidate(cfg, args.folds, args.truth_offset, progress=sys.stderr.isatty() and not args.no_progress,
-                        split=args.split, buffer_m=args.buffer, int8=args.int8, temporal=args.temporal)
+                        split=args.split, buffer_m=args.buffer, int8=args.int8, temporal=args.temporal,
+                        models_out=None if args.models_out is None else Path(args.models_out))
     print(f"blocked {args.folds}-fold cross-validation ({args.split} blocks) on {cfg.real} ({cfg.arch}, {cfg.variant}{', 3D' if cfg.use_3d else ''}):")
     print(format_table(out["reports"], out["truth_offset_m"]))
     if args.json_out:
@@ -252,6 +268,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="also the live system's figures: each fold's model, calibrated as a hybrid on the other folds, "
                         "replayed through the host's aggregator as eval --temporal does (network, hybrid and geometry)")
     p.add_argument("--predictions-out", help="write the held-out predictions, sigmas, analytic poses and truth (.npz)")
+    p.add_argument("--models-out", metavar="DIR",
+                   help="with --temporal: keep each fold's fp32 model, hybrid-calibrated on the other folds, as DIR/fold<k>.fp32.onnx")
     p.add_argument("--truth-offset", type=float, default=None, help="chest-tracker offset of the file's truth, metres (default: the dataset's)")
     p.add_argument("--json-out", help="write the reports as JSON")
     p.set_defaults(func=_run)

@@ -42,7 +42,8 @@ crossval() {  # SPLIT MEMBER INIT SIM_SEED
   local split=$1 member=$2 init=$3 seed=$4 live=()
   if [ -f "$OUT/crossval-$split-$member.npz" ]; then echo "reusing $OUT/crossval-$split-$member.*"; return; fi
   # The spatial folds also run live: each fold's model, hybrid-calibrated on the other folds, through the host's aggregator.
-  [ "$split" = space ] && live=(--temporal)
+  # Their fold models are kept (folds-space-M/) for benchmarks/live_cv.py: a host change scored live again without retraining.
+  [ "$split" = space ] && live=(--temporal --models-out "$OUT/folds-$split-$member")
   $SB crossval "${COMMON[@]}" "${FINETUNE[@]}" --sim-seed "$seed" --init "$init" --folds 5 --split "$split" --threads 1 --int8 "${live[@]}" \
       --json-out "$OUT/crossval-$split-$member.json" --predictions-out "$OUT/crossval-$split-$member.npz" \
       2> "$OUT/crossval-$split-$member.log" > "$OUT/crossval-$split-$member.txt"

@@ -12,7 +12,7 @@ import numpy as np
 import onnx
 import pytest
 
-from tests.conftest import ROOT, WTF_SITE
+from tests.conftest import DEV_JSON, ROOT, WTF_SITE
 
 
 def _cli(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
@@ -74,7 +74,8 @@ def test_calibrate_hybrid_writes_the_model_that_the_host_then_runs_as_hybrid(tin
     npz = tmp_path / "cv.npz"
     r = _cli("crossval", "--site", str(WTF_SITE), "--real", str(dev_json), "--folds", "3", "--arch", "gat", "--split", "space",
              "--hparams", '{"hidden": 16, "heads": 2, "layers": 2}', "--sim-samples", "300", "--epochs", "1", "--real-repeat", "2",
-             "--int8", "--temporal", "--predictions-out", str(npz), "--json-out", str(tmp_path / "cv.json"))
+             "--int8", "--temporal", "--predictions-out", str(npz), "--json-out", str(tmp_path / "cv.json"),
+             "--models-out", str(tmp_path / "folds"))
     assert r.returncode == 0, r.stderr[-2000:]
     assert "model int8" in r.stdout  # each fold's model quantised as train ships it, scored on its held-out samples
     # --temporal: each fold's model, calibrated as a hybrid on the other folds, run live through the aggregator
@@ -87,6 +88,17 @@ def test_calibrate_hybrid_writes_the_model_that_the_host_then_runs_as_hybrid(tin
     for key in ("hybrid", "temporal_network", "temporal_hybrid", "temporal_analytic"):
         assert z[key].shape == (225, 3) and np.isfinite(z[key]).all(), key
     assert not np.allclose(z["temporal_hybrid"], z["hybrid"])  # what the host published, not the per-frame fusion
+    # --models-out kept the fold models: benchmarks/live_cv.py replays them, and at the host's
+    # defaults reproduces crossval's live figures exactly; another filter setting changes them.
+    assert sorted(f.name for f in (tmp_path / "folds").iterdir()) == ["fold1.fp32.onnx", "fold2.fp32.onnx", "fold3.fp32.onnx"]
+    r = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "live_cv.py"), "--cv", str(npz), "--folds", str(tmp_path / "folds"),
+                        "--dataset", str(dev_json), "--set", "filter.accel_std_mps2=0.5", "--json-out", str(tmp_path / "live.json")],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    live = json.loads((tmp_path / "live.json").read_text())
+    assert live["settings"] == [{}, {"filter.accel_std_mps2": 0.5}]
+    assert live["reports"]["live defaults"] == cv["hybrid temporal"]
+    assert live["reports"]["live filter.accel_std_mps2=0.5"]["position_mae_mm"] != cv["hybrid temporal"]["position_mae_mm"]
     assert np.isfinite(z["predictions_int8"]).all() and (z["std_int8"] > 0).all()
     drift = z["predictions_int8"] - z["predictions"]
     drift[:, 2] = np.angle(np.exp(1j * drift[:, 2]))  # yaw wrapped
@@ -139,6 +151,7 @@ BAD = [
     (["train", "--site", str(WTF_SITE), "--sim-samples", "0"], "nothing to train on"),
     (["train", "--site", str(WTF_SITE), "--random-sites", "3"], "random_sites needs variant 'rays'"),
     (["crossval", "--site", str(WTF_SITE)], "needs the real data"),
+    (["crossval", "--site", str(WTF_SITE), "--real", str(DEV_JSON), "--models-out", "folds"], "--models-out needs --temporal"),
 ]
 
 
