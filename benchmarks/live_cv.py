@@ -39,45 +39,47 @@ from superbody.host.aggregator import HostConfig  # noqa: E402
 DEFAULT_DEV = ROOT.parent / "shared" / "datasets" / "wheresthefellow" / "dev.json"
 
 
-def _keys() -> dict[str, tuple[str | None, dataclasses.Field]]:
-    """Every settable key: HostConfig's scalar fields and its filter's and tracker's."""
-    base = HostConfig()
+def _settable() -> dict[str, tuple[str | None, str, object]]:
+    """KEY -> (parent field or None, field, default): HostConfig's scalar fields and its filter's and tracker's."""
     keys = {}
     for f in dataclasses.fields(HostConfig):
-        value = getattr(base, f.name)
+        value = getattr(HostConfig(), f.name)
         if dataclasses.is_dataclass(value):
-            keys.update({f"{f.name}.{g.name}": (f.name, g) for g in dataclasses.fields(value)})
+            keys.update({f"{f.name}.{g.name}": (f.name, g.name, getattr(value, g.name)) for g in dataclasses.fields(value)})
         else:
-            keys[f.name] = (None, f)
+            keys[f.name] = (None, f.name, value)
     return keys
+
+
+_KEYS = _settable()
 
 
 def _parse_set(text: str) -> tuple[str, list]:
     key, sep, values = text.partition("=")
-    keys = _keys()
-    if not sep or key not in keys:
-        raise argparse.ArgumentTypeError(f"--set must be KEY=V1,V2,... with KEY one of {', '.join(sorted(keys))}, got {text!r}")
-    kind = type(getattr(getattr(HostConfig(), keys[key][0]) if keys[key][0] else HostConfig(), keys[key][1].name))
+    if not sep or key not in _KEYS:
+        raise argparse.ArgumentTypeError(f"--set must be KEY=V1,V2,... with KEY one of {', '.join(sorted(_KEYS))}, got {text!r}")
+    kind = type(_KEYS[key][2])
     out = []
     for v in values.split(","):
+        if kind is bool and v.lower() not in ("true", "false"):
+            raise argparse.ArgumentTypeError(f"--set {key}: must be true or false, got {v!r}")
         try:
-            value = {"true": True, "false": False}[v.lower()] if kind is bool else kind(v)
+            value = v.lower() == "true" if kind is bool else kind(v)
             _apply(HostConfig(), {key: value})  # the configs' own range checks name the field and the range
-        except (KeyError, ValueError) as e:
-            raise argparse.ArgumentTypeError(f"--set {key}: {e if isinstance(e, ValueError) else f'must be true or false, got {v!r}'}") from None
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(f"--set {key}: {e}") from None
         out.append(value)
     return key, out
 
 
 def _apply(config: HostConfig, setting: dict) -> HostConfig:
     """``config`` with each ``KEY: value`` of ``setting`` replaced (nested keys on filter / tracker)."""
-    keys = _keys()
     for key, value in setting.items():
-        parent, f = keys[key]
+        parent, name, _ = _KEYS[key]
         if parent is None:
-            config = dataclasses.replace(config, **{f.name: value})
+            config = dataclasses.replace(config, **{name: value})
         else:
-            config = dataclasses.replace(config, **{parent: dataclasses.replace(getattr(config, parent), **{f.name: value})})
+            config = dataclasses.replace(config, **{parent: dataclasses.replace(getattr(config, parent), **{name: value})})
     return config
 
 

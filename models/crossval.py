@@ -158,9 +158,9 @@ def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = N
         baseline, pair = analytic_with_pairs(samples, site)
         live = _temporal(raw, samples, site, pred, std, baseline, pair, fold_of, fp32_models, offset) if temporal else {}
         if models_out is not None:
-            Path(models_out).mkdir(parents=True, exist_ok=True)
+            models_out.mkdir(parents=True, exist_ok=True)
             for k, path in fp32_models.items():  # each now carries its calibration from the other folds
-                shutil.copyfile(path, Path(models_out) / f"fold{k}.fp32.onnx")
+                shutil.copyfile(path, models_out / f"fold{k}.fp32.onnx")
     scored = {"model": pred, "hybrid": live.get("hybrid"), "model int8": pred8 if int8 else None, "model temporal": live.get("temporal_network"),
               "hybrid temporal": live.get("temporal_hybrid"), "analytic": baseline, "analytic temporal": live.get("temporal_analytic")}
     scored = {name: p for name, p in scored.items() if p is not None}  # what was run, in table order
@@ -242,7 +242,7 @@ def _run(args: argparse.Namespace) -> int:
         return 2
     out = crossvalidate(cfg, args.folds, args.truth_offset, progress=sys.stderr.isatty() and not args.no_progress,
                         split=args.split, buffer_m=args.buffer, int8=args.int8, temporal=args.temporal,
-                        models_out=None if args.models_out is None else Path(args.models_out))
+                        models_out=args.models_out)
     print(f"blocked {args.folds}-fold cross-validation ({args.split} blocks) on {cfg.real} ({cfg.arch}, {cfg.variant}{', 3D' if cfg.use_3d else ''}):")
     print(format_table(out["reports"], out["truth_offset_m"]))
     if args.json_out:
@@ -268,7 +268,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="also the live system's figures: each fold's model, calibrated as a hybrid on the other folds, "
                         "replayed through the host's aggregator as eval --temporal does (network, hybrid and geometry)")
     p.add_argument("--predictions-out", help="write the held-out predictions, sigmas, analytic poses and truth (.npz)")
-    p.add_argument("--models-out", metavar="DIR",
+    p.add_argument("--models-out", type=Path, metavar="DIR",
                    help="with --temporal: keep each fold's fp32 model, hybrid-calibrated on the other folds, as DIR/fold<k>.fp32.onnx")
     p.add_argument("--truth-offset", type=float, default=None, help="chest-tracker offset of the file's truth, metres (default: the dataset's)")
     p.add_argument("--json-out", help="write the reports as JSON")
