@@ -10,7 +10,8 @@ subtracted from its yaw first). Then:
 1. **Support gate.** Where the network has never been trained (its position, or the
    geometry's, more than ``floor_margin_m`` outside the site's floor polygon), the pose is the
    analytic one: label ``"analytic"``.
-2. **Fusion.** Otherwise each of x, y and yaw is the weighted mean of the two (yaw as a
+2. **Fusion.** Otherwise each of x, y and yaw is the weighted mean of the two (each less its
+   typical error on held-out real data per camera count, ``net_bias`` and ``analytic_bias``; yaw as a
    weighted mean of unit vectors) with weights t/s_net^2 and 1/s_geo^2, where the trust t per
    camera count and per axis was fitted on held-out real data (a network
    whose real errors are biased deserves less weight than its sigma says; 0 leaves it to
@@ -61,6 +62,10 @@ class HybridCalibration:
         analytic_bias: per camera count 1, 2, 3+, the analytic pose's typical error (x m, y m,
             yaw rad; the median, measured on real data), subtracted from it before it is used:
             e.g. a yaw convention of the site's ground truth that differs from the shoulder line.
+        net_bias: per camera count 1, 2, 3+, the network pose's typical error (x m, y m, yaw
+            rad; the median of its errors on held-out real data), subtracted from it before the
+            fusion (``models.hybrid.NET_DEBIAS``: y only; on dev.json's spatial cross-validation the
+            network's three-camera y is too large by about 0.1 m in every floor region).
         source: how the numbers were measured (free text, for the model card).
     """
 
@@ -69,6 +74,7 @@ class HybridCalibration:
     net_trust: tuple[tuple[float, float, float], ...] = ((1.0, 1.0, 1.0),) * 3
     floor_margin_m: float = 0.5
     analytic_bias: tuple[tuple[float, float, float], ...] = ((0.0, 0.0, 0.0),) * 3
+    net_bias: tuple[tuple[float, float, float], ...] = ((0.0, 0.0, 0.0),) * 3
     source: str = ""
 
     def __post_init__(self) -> None:
@@ -80,13 +86,16 @@ class HybridCalibration:
             raise ValueError(f"analytic_yaw_std_no_pair must be in (0, 100) radians, got {self.analytic_yaw_std_no_pair!r}")
         if not 0 <= self.floor_margin_m <= 10:
             raise ValueError(f"floor_margin_m must be in [0, 10] metres, got {self.floor_margin_m!r}")
-        if len(self.analytic_bias) != 3 or any(len(b) != 3 or not all(abs(v) <= 10 for v in b) for b in self.analytic_bias):
-            raise ValueError(f"analytic_bias must be 3 rows (1, 2, 3+ cameras) of 3 values in [-10, 10], got {self.analytic_bias!r}")
+        for name in ("analytic_bias", "net_bias"):
+            b = getattr(self, name)
+            if len(b) != 3 or any(len(r) != 3 or not all(abs(v) <= 10 for v in r) for r in b):
+                raise ValueError(f"{name} must be 3 rows (1, 2, 3+ cameras) of 3 values in [-10, 10], got {b!r}")
 
     def to_json(self) -> str:
         return json.dumps({"analytic_std": [list(s) for s in self.analytic_std], "analytic_yaw_std_no_pair": self.analytic_yaw_std_no_pair,
                            "net_trust": [list(s) for s in self.net_trust], "floor_margin_m": self.floor_margin_m,
-                           "analytic_bias": [list(b) for b in self.analytic_bias], "source": self.source})
+                           "analytic_bias": [list(b) for b in self.analytic_bias], "net_bias": [list(b) for b in self.net_bias],
+                           "source": self.source})
 
     @classmethod
     def from_json(cls, text: str) -> "HybridCalibration":
@@ -95,15 +104,17 @@ class HybridCalibration:
                    analytic_yaw_std_no_pair=float(d.get("analytic_yaw_std_no_pair", 3.0)),
                    net_trust=tuple(tuple(float(v) for v in s) for s in d.get("net_trust", ((1.0, 1.0, 1.0),) * 3)),
                    floor_margin_m=float(d.get("floor_margin_m", 0.5)),
-                   analytic_bias=tuple(tuple(float(v) for v in b) for b in d.get("analytic_bias", ((0.0, 0.0, 0.0),) * 3)), source=str(d.get("source", "")))
+                   analytic_bias=tuple(tuple(float(v) for v in b) for b in d.get("analytic_bias", ((0.0, 0.0, 0.0),) * 3)),
+                   net_bias=tuple(tuple(float(v) for v in b) for b in d.get("net_bias", ((0.0, 0.0, 0.0),) * 3)), source=str(d.get("source", "")))
 
     def trust(self, cameras: NDArray) -> NDArray[np.float64]:
         """(B, 3) the trust factors (x, y, yaw) for camera counts (B,)."""
         return np.asarray(self.net_trust, dtype=np.float64)[np.clip(np.asarray(cameras, int), 1, 3) - 1]
 
-    def debias(self, geo: NDArray, cameras: NDArray) -> NDArray[np.float64]:
-        """(B, 3) analytic poses less their calibrated bias (yaw wrapped to (-pi, pi])."""
-        out = np.asarray(geo, np.float64) - np.asarray(self.analytic_bias, np.float64)[np.clip(np.asarray(cameras, int), 1, 3) - 1]
+    def debias(self, geo: NDArray, cameras: NDArray, bias: str = "analytic_bias") -> NDArray[np.float64]:
+        """(B, 3) analytic poses (or with ``bias="net_bias"``, network poses) less their calibrated
+        bias (yaw wrapped to (-pi, pi])."""
+        out = np.asarray(geo, np.float64) - np.asarray(getattr(self, bias), np.float64)[np.clip(np.asarray(cameras, int), 1, 3) - 1]
         out[:, 2] = wrap_angle(out[:, 2])
         return out
 
@@ -198,6 +209,7 @@ def combine(
     Returns:
         (B, 3) poses, (B, 3) 1-sigmas and (B,) sources ("hybrid", "onnx", "analytic").
     """
+    net = calibration.debias(net, cameras, "net_bias")
     geo = calibration.debias(geo, cameras)
     geo_std = calibration.analytic_sigmas(cameras, pair)
     pose, std = fuse(net, net_std, geo, geo_std, calibration.trust(cameras))

@@ -77,12 +77,13 @@ def _calibration_table(doc: dict | None) -> list[str]:
     if not doc or "calibration" not in doc:
         return ["(not run)"]
     c, scale = doc["calibration"], doc["std_scale"]
-    out = ["| cameras | trust: x / y / yaw | network sigma scale x / y / yaw | geometry sigma x mm / y mm / yaw deg | geometry yaw bias deg |",
-           "| --- | --- | --- | --- | --- |"]
+    out = ["| cameras | trust: x / y / yaw | network sigma scale x / y / yaw | network y bias mm | geometry sigma x mm / y mm / yaw deg "
+           "| geometry yaw bias deg |", "| --- | --- | --- | --- | --- | --- |"]
     for k in range(3):
         t, sc, a, b = c["net_trust"][k], scale[k], c["analytic_std"][k], c.get("analytic_bias", [[0, 0, 0]] * 3)[k]
+        nb = c.get("net_bias", [[0, 0, 0]] * 3)[k]
         out.append(f"| {k + 1}{'+' if k == 2 else ''} | {t[0]:g} / {t[1]:g} / {t[2]:g} | {sc[0]:.2f} / {sc[1]:.2f} / {sc[2]:.2f} | "
-                   f"{1000 * a[0]:.0f} / {1000 * a[1]:.0f} / {math.degrees(a[2]):.1f} | {math.degrees(b[2]):+.1f} |")
+                   f"{1000 * nb[1]:+.0f} | {1000 * a[0]:.0f} / {1000 * a[1]:.0f} / {math.degrees(a[2]):.1f} | {math.degrees(b[2]):+.1f} |")
     return out
 
 
@@ -152,7 +153,8 @@ def main(out_dir: Path, card: Path) -> int:
          "per node (where the joint's ray meets its typical height, floor-centred) = 27. Outputs: torso centre (x, y) and (sin, cos) yaw, "
          "and the network's own 1-sigma of x, y (a Gaussian head) and yaw (a von Mises head), trained on a detached copy so that it never moves the pose.",
          "- **The host runs it as a hybrid** (`host/hybrid.py`): per person, the network's pose and the analytic (triangulation) pose are fused "
-         "by inverse variance; the network's sigmas are scaled per camera count to its errors on held-out real data, the geometry's sigmas are "
+         "by inverse variance; the network's sigmas are scaled per camera count to its errors on held-out real data, its typical y error "
+         "there (about +0.1 m with three cameras in every floor region, `models.hybrid.NET_DEBIAS`) is subtracted from its y, the geometry's sigmas are "
          "measured per camera count on dev.json (as is the geometry's typical yaw error, a few degrees, which is subtracted from its yaw), "
          "and a trust factor per camera count and axis (fitted on held-out predictions) says how much of "
          "the network's weight its real errors have earned (for position, only what beats geometry by more than a standard error of that "
@@ -189,14 +191,16 @@ def main(out_dir: Path, card: Path) -> int:
               f"{cov['position_mm']:.0f} mm, yaw {cov['yaw_deg']:.1f} deg; " + "; ".join(f"{k} camera(s): {v['position_mm']:.0f} mm, {v['yaw_deg']:.1f} deg" for k, v in by.items())
               + f". {100 * cov['train_inside_floor']:.0f}% of the training positions lie inside the floor polygon. The hybrid runs here with the "
               "real site's calibration: where dev.json taught it to trust geometry it does so in simulation too, and it removes the geometry's "
-              "real yaw bias, which the simulated truth does not have; so these simulated yaw errors overstate the hybrid's with 2 and 3 cameras."]
+              "real yaw bias and the network's real y bias, which simulation does not have; so these simulated errors overstate the hybrid's "
+              "with 2 and 3 cameras."]
     L += ["", "## Accuracy on dev.json (225 samples, per frame unless said)", ""]
     L += _cv_section("Spatially blocked 5-fold cross-validation: the proxy for places the recording never walked",
                      "The file is split into 5 floor regions (k-means on the true path); each region is predicted by the ensemble of the three "
                      "members' fine-tunings on the samples of the other regions, less every sample within 0.3 m of the held-out region (each member "
                      "cross-validated on its own, their held-out predictions combined as the ensemble combines them). The hybrid's calibration for each "
-                     "fold (sigma scales, geometry sigmas and yaw bias, trust) is fitted on the other folds only. The ensemble's make-up (a member "
-                     "from a second simulation model) and the per-axis trust were chosen on this cross-validation: these figures have seen it.", hs)
+                     "fold (sigma scales, the network's y bias, geometry sigmas and yaw bias, trust) is fitted on the other folds only. The ensemble's "
+                     "make-up (a member from a second simulation model), the per-axis trust and which axes are debiased were chosen on this "
+                     "cross-validation: these figures have seen it.", hs)
     L += _cv_section("Time-blocked 5-fold cross-validation",
                      "The same with 5 contiguous time segments (5.6 s each) as folds.", ht)
     L += ["", "### The shipped hybrid calibration (fitted on all of the spatial cross-validation's held-out predictions)", ""]

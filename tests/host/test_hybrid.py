@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
 import pytest
 
 from superbody.edge.site import load_site
-from superbody.host.hybrid import HybridCalibration, _near_floor, fuse
+from superbody.host.hybrid import HybridCalibration, _near_floor, combine, fuse
 from tests.conftest import WTF_SITE
 
 CAL = HybridCalibration(analytic_std=((0.2, 0.2, 0.5), (0.1, 0.1, 0.3), (0.05, 0.05, 0.1)), analytic_yaw_std_no_pair=2.0)
@@ -59,9 +60,11 @@ def test_analytic_sigmas_by_camera_count_and_pair():
     dict(analytic_std=CAL.analytic_std, floor_margin_m=-1.0),                  # negative margin
     dict(analytic_std=CAL.analytic_std, analytic_bias=((0, 0, 0),) * 2),         # two bias rows
     dict(analytic_std=CAL.analytic_std, analytic_bias=((0, 0, 20), (0, 0, 0), (0, 0, 0))),  # 20 rad
+    dict(analytic_std=CAL.analytic_std, net_bias=((0, 0, 0),) * 4),              # four network bias rows
+    dict(analytic_std=CAL.analytic_std, net_bias=((0, 11, 0), (0, 0, 0), (0, 0, 0))),  # 11 m
 ])
 def test_calibration_rejects_bad_values(bad):
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="net_bias must be" if "net_bias" in bad else None):
         HybridCalibration(**bad)
 
 
@@ -69,6 +72,25 @@ def test_calibration_json_round_trip():
     assert HybridCalibration.from_json(CAL.to_json()) == CAL
     biased = HybridCalibration(analytic_std=CAL.analytic_std, analytic_bias=((0.1, 0, 0.05), (0, 0, 0.07), (0, -0.02, 3.1)))
     assert HybridCalibration.from_json(biased.to_json()) == biased
+    net = HybridCalibration(analytic_std=CAL.analytic_std, net_bias=((0, 0.01, 0), (0, 0.03, 0), (0, 0.1, 0)))
+    assert HybridCalibration.from_json(net.to_json()) == net
+    # A calibration written before the network's bias existed reads as no bias.
+    old = json.loads(CAL.to_json())
+    del old["net_bias"]
+    assert HybridCalibration.from_json(json.dumps(old)).net_bias == ((0.0, 0.0, 0.0),) * 3
+
+
+def test_the_network_pose_less_its_bias_is_what_is_fused():
+    """Three cameras: the network's y less its 0.1 m bias; one camera: no bias. The support gate and
+    the "onnx" fallback (no geometry) see the debiased pose too."""
+    cal = HybridCalibration(analytic_std=CAL.analytic_std, net_bias=((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.1, 0.0)))
+    net = np.array([[0.5, 0.6, 0.2]] * 3)
+    net_std = np.full((3, 3), 1e-6)  # the network alone decides where geometry exists
+    geo = np.array([[0.5, 0.5, 0.2], [0.5, 0.5, 0.2], [np.nan, np.nan, np.nan]])
+    pose, _, source = combine(net, net_std, geo, np.ones(3, bool), np.array([1, 3, 3]), cal, load_site(WTF_SITE))
+    np.testing.assert_allclose(pose[:, :2], [[0.5, 0.6], [0.5, 0.5], [0.5, 0.5]], atol=1e-6)
+    assert list(source) == ["hybrid", "hybrid", "onnx"]
+    np.testing.assert_array_equal(net[1], [0.5, 0.6, 0.2])  # the input is not modified
 
 
 def test_debias_subtracts_the_bias_of_each_camera_count_and_wraps_yaw():

@@ -13,7 +13,7 @@ torch = pytest.importorskip("torch")
 from superbody.edge.site import load_site  # noqa: E402
 from superbody.host.hybrid import fuse  # noqa: E402
 from superbody.models.crossval import spatial_folds  # noqa: E402
-from superbody.models.hybrid import TRUST_GRID, fit_analytic, fit_calibration, fit_std_scale, fit_trust, hybrid_poses, leave_one_fold_out, robust_sigma, scaled_std, sigma_coverage  # noqa: E402
+from superbody.models.hybrid import NET_DEBIAS, TRUST_GRID, fit_analytic, fit_calibration, fit_net_bias, fit_std_scale, fit_trust, hybrid_poses, leave_one_fold_out, robust_sigma, scaled_std, sigma_coverage  # noqa: E402
 from superbody.models.nets import pose_nll  # noqa: E402
 from tests.conftest import WTF_SITE  # noqa: E402
 
@@ -77,6 +77,31 @@ def test_fit_analytic_measures_and_removes_the_yaw_bias_but_not_the_position_bia
     assert np.median(err) < 0.05  # the geometry's yaw, less its bias
     plain = fit_analytic(pred, np.ones(n, bool), truth, cams, debias=(False, False, False))
     assert np.array(plain.analytic_bias).tolist() == [[0.0] * 3] * 3 and plain.analytic_std[0][2] > 0.25
+
+
+def test_the_networks_y_bias_is_measured_per_camera_count_and_removed_before_the_trust_is_fitted():
+    """Three cameras: an otherwise accurate network whose y errs by +0.1 m, against a geometry of
+    0.05 m. Its bias is measured (y only, ``NET_DEBIAS``), and the network less it earns the
+    y trust that the biased one could not."""
+    assert NET_DEBIAS == (False, True, False)
+    rng = np.random.default_rng(6)
+    n = 1500
+    cams = rng.integers(1, 4, n)
+    truth = np.column_stack([rng.uniform(-1, 1, (n, 2)), rng.uniform(-3, 3, n)])
+    offset = np.array([[0.05, 0.0, 0.0], [0.0, -0.03, 0.0], [0.2, 0.1, 0.1]])  # x m, y m, yaw rad per count
+    net = truth + offset[cams - 1] + rng.normal(0, 0.02, (n, 3))
+    geo = truth + rng.normal(0, 0.05, (n, 3))
+    np.testing.assert_allclose(fit_net_bias(net, truth, cams), [[0, 0, 0], [0, -0.03, 0], [0, 0.1, 0]], atol=0.005)
+    pair = np.ones(n, bool)
+    _, cal = fit_calibration(net, np.full((n, 3), 0.02), geo, pair, truth, cams)
+    np.testing.assert_allclose(np.array(cal.net_bias)[:, 1], [0.0, -0.03, 0.1], atol=0.005)
+    assert cal.net_trust[2][1] >= 1  # y: the debiased network is trusted
+    scale, _ = fit_calibration(net, np.full((n, 3), 0.02), geo, pair, truth, cams)
+    fused, _, _ = hybrid_poses(net, scaled_std(np.full((n, 3), 0.02), scale, cams), geo, pair, cams, cal, load_site(WTF_SITE))
+    three = cams == 3
+    err = lambda p, axis: np.abs(p[three, axis] - truth[three, axis]).mean()  # noqa: E731
+    assert err(fused, 1) < 0.03 < err(geo, 1) and err(fused, 1) < err(net, 1)
+    assert err(fused, 0) <= 1.05 * err(geo, 0)  # x keeps its bias, and goes to geometry
 
 
 def test_trust_is_earned_per_camera_count_and_per_axis():
