@@ -52,7 +52,7 @@ bench: $(VENV)/.dev-installed
 	$(PY) benchmarks/model_bench.py
 	$(PY) benchmarks/host_bench.py --zenoh
 
-# Retrain the shipped models and rewrite models/MODEL_CARD.md (~2 h on 2 cores; needs dev.json).
+# Retrain the shipped models and rewrite models/MODEL_CARD.md (about 1 h on 2 cores, 62 min in December 2026; needs dev.json).
 models: $(VENV)/.dev-installed
 	scripts/train_models.sh
 

@@ -257,7 +257,7 @@ def main(out_dir: Path, card: Path) -> int:
         for kind, rates in bench.items():  # {"fp32": {"1": graphs/s, "64": graphs/s}, "int8": {...}}
             for b, gps in rates.items():
                 L.append(f"| {kind} | {b} | {1e3 * int(b) / gps:.3f} | {gps:.0f} |")
-    L += ["", "## Reproduce", "", "```sh", "make models   # ~2 h on 2 cores; needs ../shared/datasets/wheresthefellow/dev.json", "```", "",
+    L += ["", "## Reproduce", "", "```sh", "make models   # about 1 h on 2 cores; needs ../shared/datasets/wheresthefellow/dev.json", "```", "",
           "Limits: one real recording (27 s, one person, 225 samples) is all the real data; its path covers about a third of the floor, "
           "so the spatial folds are small regions of that third; every hybrid parameter is fitted on those 225 samples (per fold, on the others). "
           "The 0.21 m truth offset is a mean; the tracker also leads the skeletons by 0.2-0.3 s when walking (docs/dataset.md), "

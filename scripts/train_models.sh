@@ -15,7 +15,7 @@
 #      --int8), so the card gives the int8 hybrid's figures on the cross-validation too;
 #   5. evaluation on dev.json (per frame and temporal, through the host's aggregator), the
 #      coverage maps, the demo on simulation, the inference benchmark, and the card.
-# About 2 hours on 2 cores. Outputs in build/models; the shipped files are copied to models/.
+# About 1 hour on 2 cores (62 min in December 2026). Outputs in build/models; the shipped files are copied to models/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 DEV=${DEV:-../shared/datasets/wheresthefellow/dev.json}
