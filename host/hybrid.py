@@ -27,7 +27,7 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Final
+from typing import Final, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -111,10 +111,10 @@ class HybridCalibration:
         """(B, 3) the trust factors (x, y, yaw) for camera counts (B,)."""
         return np.asarray(self.net_trust, dtype=np.float64)[np.clip(np.asarray(cameras, int), 1, 3) - 1]
 
-    def debias(self, geo: NDArray, cameras: NDArray, bias: str = "analytic_bias") -> NDArray[np.float64]:
+    def debias(self, pose: NDArray, cameras: NDArray, bias: Literal["analytic_bias", "net_bias"] = "analytic_bias") -> NDArray[np.float64]:
         """(B, 3) analytic poses (or with ``bias="net_bias"``, network poses) less their calibrated
         bias (yaw wrapped to (-pi, pi])."""
-        out = np.asarray(geo, np.float64) - np.asarray(getattr(self, bias), np.float64)[np.clip(np.asarray(cameras, int), 1, 3) - 1]
+        out = np.asarray(pose, np.float64) - np.asarray(getattr(self, bias), np.float64)[np.clip(np.asarray(cameras, int), 1, 3) - 1]
         out[:, 2] = wrap_angle(out[:, 2])
         return out
 
