@@ -8,7 +8,7 @@ operation, in a shuffled order (so that a burst of load on a shared machine hits
 alike), each call timed on its own; the figure is the median of all those per-call times, in
 microseconds:
 
-- ``observation_10``: ``decode_us`` (``edge.wire.decode``, validation included) and
+- ``observation_10``: ``decode_us`` (``edge.messages.wire.decode``, validation included) and
   ``json_loads_us`` (``json.loads`` of the same bytes: parsing alone, no checks, no arrays).
 - ``pose_array_10``: ``encode_us`` (``host.pose.encode`` of the PoseArray, validation included),
   ``decode_us`` (``host.pose.decode`` of its bytes) and ``json_dumps_us`` (``json.dumps`` of
@@ -36,9 +36,9 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from superbody.edge import wire  # noqa: E402
+from superbody.edge.messages import wire  # noqa: E402
 from superbody.edge.resources import site_path  # noqa: E402
-from superbody.edge.simulator import SimCamera, World  # noqa: E402
+from superbody.edge.sim import SimCamera, World  # noqa: E402
 from superbody.edge.site import load_site  # noqa: E402
 from superbody.host import pose as pose_msg  # noqa: E402
 

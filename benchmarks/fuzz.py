@@ -27,9 +27,9 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from superbody.edge import wire  # noqa: E402
-from superbody.edge.payload import REASONS, DecodeError  # noqa: E402
-from superbody.edge.simulator import SimCamera, World  # noqa: E402
+from superbody.edge.messages import wire  # noqa: E402
+from superbody.edge.messages.payload import REASONS, DecodeError  # noqa: E402
+from superbody.edge.sim import SimCamera, World  # noqa: E402
 from superbody.edge.site import load_site  # noqa: E402
 from superbody.host import pose as pose_msg  # noqa: E402
 

@@ -38,10 +38,11 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from superbody.edge import transport, wire  # noqa: E402
+from superbody.edge import transport  # noqa: E402
+from superbody.edge.messages import wire
 from superbody.edge.camera import Camera, look_at_rotation  # noqa: E402
 from superbody.edge.resources import model_path  # noqa: E402
-from superbody.edge.simulator import SimCamera, World  # noqa: E402
+from superbody.edge.sim import SimCamera, World  # noqa: E402
 from superbody.edge.site import Site, dump_site  # noqa: E402
 from superbody.host import pose as pose_msg  # noqa: E402
 from superbody.host.aggregator import Aggregator  # noqa: E402

@@ -61,8 +61,9 @@ sys.path.insert(0, str(ROOT))
 import numpy as np  # noqa: E402
 
 from benchmarks.host_bench import ring_site  # noqa: E402
-from superbody.edge import transport, wire  # noqa: E402
-from superbody.edge.simulator import SimCamera, World  # noqa: E402
+from superbody.edge import transport  # noqa: E402
+from superbody.edge.messages import wire
+from superbody.edge.sim import SimCamera, World  # noqa: E402
 from superbody.edge.site import dump_site  # noqa: E402
 from superbody.host import pose as pose_msg  # noqa: E402
 from superbody.host.demo import stop_processes  # noqa: E402

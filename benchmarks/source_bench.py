@@ -23,12 +23,12 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from superbody.edge import wire  # noqa: E402
-from superbody.edge.detector import open_detector, parse_detector  # noqa: E402
+from superbody.edge.messages import wire  # noqa: E402
+from superbody.edge.detectors import open_detector, parse_detector  # noqa: E402
 from superbody.edge.node import frame_observation  # noqa: E402
-from superbody.edge.simulator import SimCamera, World  # noqa: E402
+from superbody.edge.sim import SimCamera, World  # noqa: E402
 from superbody.edge.site import load_site  # noqa: E402
-from superbody.edge.video import VideoSource  # noqa: E402
+from superbody.edge.sources.video import VideoSource  # noqa: E402
 from tests.edge.photos import astronaut_video  # noqa: E402
 
 
@@ -91,7 +91,7 @@ def main(seconds: float, yolo: str | None, rtmo: str | None, json_out: str | Non
         detectors += [(f"rtmo:{rtmo}", "rtmo", {})] if rtmo else []
         for spec, name, opts in detectors:
             if opts:
-                from superbody.edge.blazepose import BlazePose
+                from superbody.edge.detectors.blazepose import BlazePose
 
                 det = BlazePose(**opts)
             else:

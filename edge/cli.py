@@ -9,36 +9,11 @@ from __future__ import annotations
 
 import argparse
 import logging
-import math
 import re
 import sys
 from importlib.metadata import entry_points
 
-__all__ = ["main", "register", "build_parser", "positive", "int_in"]
-
-
-def positive(text: str) -> float:
-    """argparse type: a positive finite number."""
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not (v > 0 and math.isfinite(v)):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
-    return v
-
-
-def int_in(lo: int, hi: int, name: str):
-    """argparse type: an integer in [lo, hi]; the error names the option."""
-    def parse(text: str) -> int:
-        try:
-            n = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} must be an integer in [{lo}, {hi}], got {text!r}") from None
-        if not lo <= n <= hi:
-            raise argparse.ArgumentTypeError(f"{name} must be in [{lo}, {hi}], got {n}")
-        return n
-    return parse
+__all__ = ["main", "register", "build_parser"]
 
 
 def _version() -> str:

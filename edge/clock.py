@@ -8,11 +8,10 @@ agree on capture times.
 
 from __future__ import annotations
 
-import argparse
 import time
 from dataclasses import dataclass
 
-__all__ = ["WorldClock", "add_clock_args", "clock_from_args"]
+__all__ = ["WorldClock"]
 
 
 @dataclass(frozen=True)
@@ -38,15 +37,3 @@ class WorldClock:
         delay = (self.wall_ns(world_ns) - time.time_ns()) * 1e-9
         if delay > 0:
             time.sleep(delay)
-
-
-def add_clock_args(parser: argparse.ArgumentParser) -> None:
-    """``--clock-scale`` and ``--clock-anchor-ns``: every process of a run must get the same."""
-    from superbody.edge.cli import positive
-
-    parser.add_argument("--clock-scale", type=positive, default=1.0, help="world seconds per wall second (simulation speed-up)")
-    parser.add_argument("--clock-anchor-ns", type=int, default=0, help="wall time (UNIX ns) at which world and wall clocks agree; a simulated source's scene starts there")
-
-
-def clock_from_args(args: argparse.Namespace) -> WorldClock:
-    return WorldClock(args.clock_anchor_ns, args.clock_scale)

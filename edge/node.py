@@ -6,16 +6,16 @@ holds a liveliness token on ``superbody/<site>/cameras/<camera>/alive`` while it
 
 Sources (``--source``):
 
-- ``sim``: simulated people (edge/sim_source.py), paced on the world clock;
-- ``oak[:DEVICE_ID]``: a Luxonis OAK with the pose network on the device (edge/oak.py, the
+- ``sim``: simulated people (edge/sources/sim_source.py), paced on the world clock;
+- ``oak[:DEVICE_ID]``: a Luxonis OAK with the pose network on the device (edge/sources/oak.py, the
   ``oak`` extra);
-- ``video:PATH``, ``webcam:INDEX``, ``rtsp://...``: OpenCV captures (edge/video.py) whose images
+- ``video:PATH``, ``webcam:INDEX``, ``rtsp://...``: OpenCV captures (edge/sources/video.py) whose images
   go through a host detector, ``--detector blazepose | yolo-pose:PATH.onnx | rtmo:PATH.onnx``
-  (edge/detector.py);
+  (edge/detectors/base.py);
 - ``replay:PATH``: a ``superbody record`` MCAP file, this camera's Observations re-published
-  with their original timing, stamps shifted to the replay's start (edge/replay.py).
+  with their original timing, stamps shifted to the replay's start (edge/sources/replay.py).
 
-Every frame takes one path (edge/source.py): detections from the source or from the detector,
+Every frame takes one path (edge/sources/source.py): detections from the source or from the detector,
 each person's colour signature from their box in the image when there is one, then encode,
 publish.
 """
@@ -35,14 +35,16 @@ from urllib.parse import urlsplit
 import numpy as np
 from numpy.typing import NDArray
 
-from superbody.edge import transport, wire
-from superbody.edge.cli import int_in, positive
-from superbody.edge.clock import WorldClock, add_clock_args, clock_from_args
+from superbody.edge import transport
+from superbody.edge.cli_args import add_clock_args, clock_from_args, int_in, positive
+from superbody.edge.clock import WorldClock
 from superbody.edge.colour import hs_histogram
-from superbody.edge.detector import DETECTOR_FORMS, Detector, DetectorError, DetectorSpec, parse_detector
-from superbody.edge.observation import Observation, PersonView, empty_histogram
+from superbody.edge.detectors import DETECTOR_FORMS, DetectorSpec, parse_detector
+from superbody.edge.detectors.base import Detector, DetectorError
+from superbody.edge.messages import wire
+from superbody.edge.messages.observation import Observation, PersonView, empty_histogram
 from superbody.edge.site import Site, SiteError, load_site
-from superbody.edge.source import Frame, FrameSource, SourceError
+from superbody.edge.sources.source import Frame, FrameSource, SourceError
 
 __all__ = [
     "SOURCE_FORMS",
@@ -139,24 +141,24 @@ def open_source(
     """
     cam = site.camera(camera_id)
     if spec.kind == "sim":
-        from superbody.edge.sim_source import SimSource
+        from superbody.edge.sources.sim_source import SimSource
 
         return SimSource(site, camera_id, seed, people, depth, clock)
     if spec.kind == "oak":
         try:
-            from superbody.edge.oak import open_oak_source
+            from superbody.edge.sources.oak import open_oak_source
 
             return open_oak_source(site, camera_id, spec.target, nn_archive, oak_model, depth)  # type: ignore[arg-type]
         except ImportError as e:
             raise SourceError(f"--source {spec}: OAK support is not installed (pip install 'superbody[oak]'): {e}") from None
     if spec.kind == "replay":
-        from superbody.edge.replay import ReplaySource
+        from superbody.edge.sources.replay import ReplaySource
 
         try:
             return ReplaySource(str(spec.target), site, camera_id, start_ns=replay_start_ns, loop=loop)
         except ImportError as e:
             raise SourceError(f"--source {spec}: replay needs the mcap package (pip install 'superbody[view]'): {e}") from None
-    from superbody.edge.video import VideoSource
+    from superbody.edge.sources.video import VideoSource
 
     return VideoSource(spec.kind, spec.target, cam.width, cam.height, realtime=realtime, loop=loop)  # type: ignore[arg-type]
 
@@ -322,7 +324,7 @@ def _run(args: argparse.Namespace) -> int:
         return error(e)
     detector = None
     if args.detector is not None:
-        from superbody.edge.detector import open_detector
+        from superbody.edge.detectors import open_detector
 
         try:
             detector = open_detector(args.detector)

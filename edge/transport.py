@@ -24,7 +24,7 @@ examples) sets any other config path and wins over both.
 
 Keys (everything under ``superbody/<site>/``):
 
-- ``superbody/<site>/cameras/<camera>/observations``: Observations (edge/wire.py).
+- ``superbody/<site>/cameras/<camera>/observations``: Observations (edge/messages/wire.py).
 - ``superbody/<site>/cameras/<camera>/alive``: the camera node's liveliness token.
 - ``superbody/<site>/people``: the host's PoseArray.
 - ``superbody/<site>/host/alive``: the host's liveliness token.

@@ -35,9 +35,10 @@ from typing import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from superbody.edge import transport, wire
+from superbody.edge import transport
+from superbody.edge.messages import wire
 from superbody.edge.clock import WorldClock
-from superbody.edge.observation import PersonView
+from superbody.edge.messages.observation import PersonView
 from superbody.edge.site import Site
 from superbody.host import pose as pose_msg
 from superbody.host import status as host_status

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from superbody.edge import body
 from superbody.edge.camera import intersect_plane, pixel_to_ray
-from superbody.edge.observation import PersonView
+from superbody.edge.messages.observation import PersonView
 from superbody.edge.site import Site
 
 __all__ = ["AnalyticEstimator", "triangulate", "joints_3d", "pair_points"]

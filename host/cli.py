@@ -11,8 +11,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from superbody.edge import transport
-from superbody.edge.cli import positive
-from superbody.edge.clock import add_clock_args, clock_from_args
+from superbody.edge.cli_args import add_clock_args, clock_from_args, positive
 from superbody.edge.site import Site, SiteError, load_site
 
 __all__ = ["register", "build_estimator", "default_model"]

@@ -31,12 +31,13 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from superbody.edge import transport, wire
-from superbody.edge.cli import int_in, positive
-from superbody.edge.resources import site_path
-from superbody.edge.clock import WorldClock
+from superbody.edge import transport
 from superbody.edge.angles import wrap_angle
-from superbody.edge.simulator import SimCamera, World
+from superbody.edge.cli_args import int_in, positive
+from superbody.edge.clock import WorldClock
+from superbody.edge.messages import wire
+from superbody.edge.resources import site_path
+from superbody.edge.sim import SimCamera, World
 from superbody.edge.site import SiteError, load_site
 from superbody.host import pose as pose_msg
 

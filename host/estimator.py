@@ -34,7 +34,7 @@ import onnxruntime as ort
 from numpy.typing import NDArray
 
 from superbody.edge.colour import HIST_BINS
-from superbody.edge.observation import PersonView
+from superbody.edge.messages.observation import PersonView
 from superbody.edge.site import Site
 from superbody.host.graph import GraphSpec, Variant, build_batch, floor_centre
 

@@ -53,7 +53,7 @@ from numpy.typing import NDArray
 
 from superbody.edge.body import KEYPOINTS, MIRROR, NUM_KEYPOINTS, PARENT, TYPICAL_HEIGHT_M
 from superbody.edge.camera import normalised_to_rays, undistort
-from superbody.edge.observation import PersonView
+from superbody.edge.messages.observation import PersonView
 from superbody.edge.site import Site
 
 __all__ = [

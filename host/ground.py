@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 from superbody.edge.body import INDEX, LEFT_HIP, LEFT_SHOULDER, RIGHT_HIP, RIGHT_SHOULDER, TYPICAL_HEIGHT_M
 from superbody.edge.camera import Camera, intersect_plane, pixel_to_ray
-from superbody.edge.observation import PersonView
+from superbody.edge.messages.observation import PersonView
 
 __all__ = ["MAX_RANGE_M", "LEVELS", "Level", "ground_point", "ground_points"]
 

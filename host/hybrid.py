@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 
 from superbody.edge.angles import wrap_angle
 from superbody.edge.floor import point_in_polygon
-from superbody.edge.observation import PersonView
+from superbody.edge.messages.observation import PersonView
 from superbody.edge.site import Site
 from superbody.host.analytic import AnalyticEstimator
 from superbody.host.estimator import Estimates, ModelMismatchError, OnnxEstimator

@@ -15,9 +15,9 @@ The schema, for subscribers in any language, is in ``docs/pose-schema.md``. In s
 confidence to 1e-4 and covariances to 6 significant digits, so a person is about 250 bytes.
 ``decode`` checks every field and raises ``PoseDecodeError`` naming the field
 (``people[2].cov[3]``), a ``reason`` from ``REASONS`` for reject counters, and the allowed range;
-the checks shared with the Observation codec are in ``edge/payload.py``.
+the checks shared with the Observation codec are in ``edge/messages/payload.py``.
 
-How (as in ``edge/wire.py``): the message is defined as msgspec structs (``PoseArrayMsg``,
+How (as in ``edge/messages/wire.py``): the message is defined as msgspec structs (``PoseArrayMsg``,
 ``PersonPoseMsg``, and their version 1 forms), which carry every rule a JSON Schema can state and
 from which ``docs/schemas/people.schema.json`` is generated. A payload the reference encoder
 could have written (ASCII, no escapes) is decoded by msgspec in one pass, then checked for what a
@@ -41,7 +41,7 @@ import numpy as np
 from msgspec import Meta, Struct
 from numpy.typing import NDArray
 
-from superbody.edge.payload import (
+from superbody.edge.messages.payload import (
     MAX_INT63,
     NAME_PATTERN,
     REASONS,
@@ -305,7 +305,7 @@ class PoseDecodeError(DecodeError):
     Attributes:
         field: dotted path of the offending value, e.g. ``people[2].cov[3]``; ``$`` for the
             payload as a whole.
-        reason: one of ``REASONS`` (the vocabulary of ``edge.payload``), for counting rejects.
+        reason: one of ``REASONS`` (the vocabulary of ``edge.messages.payload``), for counting rejects.
         detail: what was wrong and what is allowed.
     """
 

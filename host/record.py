@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import BinaryIO
 
 from superbody.edge import transport
-from superbody.edge.cli import positive
+from superbody.edge.cli_args import positive
 from superbody.edge.resources import json_schema, package_version
 from superbody.edge.site import NAME_RE
 

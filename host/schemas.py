@@ -1,6 +1,6 @@
 """The JSON Schemas (draft 2020-12) of the three superbody messages, generated from their types.
 
-The typed message definitions are the source: ``edge.wire.ObservationMsg``,
+The typed message definitions are the source: ``edge.messages.wire.ObservationMsg``,
 ``host.pose.PoseArrayMsg`` (what the host writes: version 2) and ``host.status.HostStatus``.
 ``msgspec.json.schema_components`` turns them into JSON Schema; this module inlines the
 definitions (one self-contained object per message, as MCAP and Foxglove take them) and adds the
@@ -22,7 +22,7 @@ from typing import Any, Final
 
 import msgspec
 
-from superbody.edge import wire
+from superbody.edge.messages import wire
 from superbody.host import pose, status
 
 __all__ = ["MESSAGES", "FILES", "generate", "render"]

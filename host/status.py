@@ -20,7 +20,7 @@ from typing import Annotated, Any, Final
 import msgspec
 from msgspec import Meta, Struct
 
-from superbody.edge.payload import NAME_PATTERN, DecodeError, check_object, fail, join_path, parse_json
+from superbody.edge.messages.payload import NAME_PATTERN, DecodeError, check_object, fail, join_path, parse_json
 from superbody.edge.site import NAME_RE
 
 __all__ = ["MAX_PAYLOAD_BYTES", "MAX_CAMERAS", "Latency", "HostStatus", "latency", "encode", "decode"]

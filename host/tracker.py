@@ -58,7 +58,7 @@ from scipy.optimize import linear_sum_assignment
 
 from superbody.edge.body import NUM_KEYPOINTS
 from superbody.edge.colour import HIST_BINS, bhattacharyya_matrix
-from superbody.edge.observation import Observation, PersonView
+from superbody.edge.messages.observation import Observation, PersonView
 from superbody.edge.site import Site
 from superbody.host.filter import joseph_position_update
 from superbody.host.ground import ground_points

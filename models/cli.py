@@ -83,10 +83,9 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
     h.add_argument("--model", type=Path, action="append", default=[], metavar="M.onnx", help="model to write the calibration into (repeatable)")
     h.add_argument("--json-out", type=Path, metavar="F", help="write the calibration, coverage and scores as JSON")
     h.set_defaults(func=_run_calibrate_hybrid)
-    from superbody.models import board_calibration  # `calibrate board` and `calibrate intrinsics`; OpenCV loads on run
+    from superbody.edge.calibration import cli as calibration_cli  # board, intrinsics, oak-intrinsics; OpenCV loads on run
 
-    board_calibration.register(csub)
-    _add_calibrate_oak_intrinsics(csub)
+    calibration_cli.register(csub)
 
 
 _FPS_NOTE = """\
@@ -269,80 +268,6 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
 
 
 # --- calibrate oak-intrinsics -------------------------------------------------------------------
-
-
-def _add_calibrate_oak_intrinsics(csub: argparse._SubParsersAction) -> None:
-    o = csub.add_parser(
-        "oak-intrinsics",
-        help="take a camera's intrinsics from its OAK device's calibration",
-        description=(
-            "Read the intrinsics and distortion of an OAK's colour camera for the NN frame the OAK source "
-            "uses (the site camera's size, or --size; centre crop) from the device's calibration, print them "
-            "beside the site's, and with --out write the site with them."
-        ),
-    )
-    o.add_argument("--site", type=Path, required=True, metavar="SITE.toml", help="site file")
-    o.add_argument("--camera", required=True, metavar="ID", help="camera id in the site")
-    o.add_argument("--device", default=None, metavar="DEVICE_ID", help="OAK MX id / serial, IP or USB path (default: the first found)")
-    o.add_argument("--size", default=None, metavar="WxH", help="NN frame size (default: the site camera's width x height)")
-    o.add_argument("--out", type=Path, default=None, metavar="SITE.toml", help="write the site with this camera's intrinsics here")
-    o.set_defaults(func=_run_calibrate_oak_intrinsics)
-
-
-def _frame_size(text: str) -> tuple[int, int]:
-    w, sep, h = text.lower().partition("x")
-    if not sep or not w.isdigit() or not h.isdigit() or not (16 <= int(w) <= 16384 and 16 <= int(h) <= 16384):
-        raise ValueError(f"--size must be WIDTHxHEIGHT with each in [16, 16384], e.g. 512x288, got {text!r}")
-    return int(w), int(h)
-
-
-def _leading_comments(path: Path) -> str:
-    """The comment lines at the top of a file, without their '# ' (dump_site writes them back)."""
-    lines = []
-    for line in path.read_text(encoding="utf-8").splitlines():
-        if not line.startswith("#"):
-            break
-        lines.append(line[1:].removeprefix(" "))
-    return "\n".join(lines)
-
-
-def _run_calibrate_oak_intrinsics(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from superbody.edge import oak
-    from superbody.edge.oak_convert import camera_with_intrinsics, site_with_camera
-    from superbody.edge.site import SiteError, dump_site, load_site
-    from superbody.edge.source import SourceError
-
-    command = "calibrate oak-intrinsics"
-    try:
-        site = load_site(args.site)
-        cam = site.camera(args.camera)
-        width, height = _frame_size(args.size) if args.size else (cam.width, cam.height)
-        K, dist, device_id = oak.read_device_intrinsics(args.device, width, height)
-        new = camera_with_intrinsics(cam, K, dist, width, height)
-        print(f"OAK {device_id}, {width}x{height} NN frame (site camera {cam.id!r}: {cam.width}x{cam.height})")
-        print(f"{'':>4} {'site':>12} {'device':>12}")
-        for name in ("fx", "fy", "cx", "cy"):
-            print(f"{name:>4} {getattr(cam, name):>12.3f} {getattr(new, name):>12.3f}")
-        print(f"dist site {list(cam.dist)}, device {list(new.dist)}")
-        if args.out is not None:
-            header = _leading_comments(args.site)
-            note = f"Camera {cam.id} intrinsics from OAK {device_id} ({width}x{height}): superbody calibrate oak-intrinsics"
-            text = dump_site(site_with_camera(site, new), header="\n".join(filter(None, (header, note))))
-            args.out.write_text(text, encoding="utf-8")
-            back = load_site(args.out).camera(cam.id)
-            fields = lambda c: [c.width, c.height, c.fx, c.fy, c.cx, c.cy, *c.dist]  # noqa: E731
-            if len(back.dist) != len(new.dist) or not np.allclose(fields(back), fields(new), rtol=0, atol=1e-6):
-                return _fail(command, f"{args.out}: the site file read back differs from the one written")
-            print(f"wrote {args.out}")
-    except KeyError as e:
-        return _fail(command, str(e.args[0]))
-    except (SiteError, SourceError, ValueError) as e:
-        return _fail(command, str(e))
-    except OSError as e:
-        return _fail(command, f"{e.filename}: {e.strerror or e}")
-    return 0
 
 
 # --- eval ---------------------------------------------------------------------------------------

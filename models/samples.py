@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from superbody.edge.observation import PersonView
+from superbody.edge.messages.observation import PersonView
 
 __all__ = ["Sample"]
 

@@ -1,6 +1,6 @@
 """Simulated training data (the paper's DS2, made from a site file), and random sites.
 
-``generate(site, config)`` places simulated people in the site (edge/simulator.py), renders
+``generate(site, config)`` places simulated people in the site (edge/sim/), renders
 what each camera's detector reports, and returns one ``Sample`` per person and instant seen by
 at least one camera, with the ground truth. Work is split into seeded chunks run in parallel,
 so the result depends only on the config, not on the number of workers.
@@ -24,10 +24,11 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from superbody.edge.camera import Camera, look_at_rotation
-from superbody.edge.observation import PersonView
 from superbody.edge.angles import wrap_angle
-from superbody.edge.simulator import NoiseModel, PersonState, World, _free_space, render_views
+from superbody.edge.camera import Camera, look_at_rotation
+from superbody.edge.messages.observation import PersonView
+from superbody.edge.sim import NoiseModel, PersonState, World, render_views
+from superbody.edge.sim.world import _free_space
 from superbody.edge.site import Obstacle, Site
 from superbody.models.samples import Sample
 

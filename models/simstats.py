@@ -11,7 +11,7 @@ import numpy as np
 from tqdm import tqdm
 
 from superbody.edge import body
-from superbody.edge.simulator import NoiseModel, SimCamera, World
+from superbody.edge.sim import NoiseModel, SimCamera, World
 from superbody.edge.site import Site, load_site
 
 __all__ = ["statistics", "simulate", "facing_rates", "FACING_BINS"]
@@ -53,7 +53,7 @@ def facing_rates(samples: list[dict], truths: list, site: Site, bins: int = FACI
     Returns:
         ``(rates, counts)``: (17, bins) share of views reporting each joint, and (bins,) views
         per bin; every view is counted twice, as itself and mirrored left-right, so the table is
-        symmetric (``edge.simulator.FACING_VISIBILITY`` is it divided by its mean per joint).
+        symmetric (``edge.sim.FACING_VISIBILITY`` is it divided by its mean per joint).
     """
     rel, vis = [], []
     for s, (x, y, yaw) in zip(samples, truths):

@@ -7,7 +7,7 @@ latest fresh view per camera, possibly from different instants) and the Kalman f
 and predicts the pose on to the newest view's time). ``replay`` runs exactly that code, in-process, with the world
 clock injected:
 
-1. every view of every sample becomes an Observation encoded with ``edge.wire``, as a camera
+1. every view of every sample becomes an Observation encoded with ``edge.messages.wire``, as a camera
    node would publish it: keypoints (u, v, score), the box around them
    (``models.wtf.keypoint_bbox``), camera-frame 3D joints only when the estimator's graph uses
    them, and a colour signature. A WheresTheFellow recording has no colour: each view gets the
@@ -51,10 +51,11 @@ from typing import TYPE_CHECKING, Final, Literal, Mapping, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from superbody.edge import transport, wire
+from superbody.edge import transport
+from superbody.edge.messages import wire
 from superbody.edge.angles import wrap_angle
 from superbody.edge.colour import HIST_BINS
-from superbody.edge.observation import Observation, PersonView
+from superbody.edge.messages.observation import Observation, PersonView
 from superbody.edge.site import Site
 from superbody.host.aggregator import Aggregator, HostConfig
 from superbody.host.estimator import Estimator
@@ -63,7 +64,7 @@ from superbody.models.samples import Sample
 from superbody.models.wtf import RawSample, torso_to_truth
 
 if TYPE_CHECKING:
-    from superbody.edge.simulator import NoiseModel
+    from superbody.edge.sim import NoiseModel
 
 __all__ = [
     "SIGNATURE",
@@ -475,14 +476,14 @@ def simulated_recording(
         duration_s: length of the recording.
         rate_hz: samples per second (dev.json: about 8).
         seed: the person, their walk and the detector noise follow from it.
-        noise: the detector noise model (``edge.simulator.NoiseModel()`` by default).
+        noise: the detector noise model (``edge.sim.NoiseModel()`` by default).
         camera_offsets_ms: capture offset of each camera of the site, in site order.
         start_s: world time of the first frame, seconds.
 
     Returns:
         ``(samples, stamps)``: as ``models.wtf.to_samples`` and ``view_stamps`` give for a file.
     """
-    from superbody.edge.simulator import NoiseModel, World, render_views  # OpenCV: only for simulated recordings
+    from superbody.edge.sim import NoiseModel, World, render_views  # OpenCV: only for simulated recordings
 
     if not (0 < duration_s <= 3600 and 0 < rate_hz <= 100):
         raise ValueError(f"simulated_recording: duration_s must be in (0, 3600] and rate_hz in (0, 100], got {duration_s}, {rate_hz}")

@@ -46,7 +46,7 @@ from numpy.typing import ArrayLike, NDArray
 from superbody.edge.angles import wrap_angle
 from superbody.edge.body import INDEX, KEYPOINTS, NUM_KEYPOINTS
 from superbody.edge.camera import Camera, world_to_camera
-from superbody.edge.observation import PersonView, empty_histogram
+from superbody.edge.messages.observation import PersonView, empty_histogram
 from superbody.edge.site import Site
 from superbody.models.samples import Sample
 

@@ -5,7 +5,7 @@
 
 For each camera, the board (5x7 squares of 0.16 m, 0.12 m DICT_5X5_100 markers) lies on the
 floor with its centre ``--distance`` metres in front of the camera, turned by each of ``--yaws``
-degrees; ``edge.board.render_board`` draws what the camera sees (anti-aliased, blurred, noisy,
+degrees; ``edge.calibration.board.render_board`` draws what the camera sees (anti-aliased, blurred, noisy,
 unevenly lit; a new floor pattern, light and noise per seed), and the real command
 ``superbody calibrate board`` solves the camera's pose from the image. The table gives the
 distance between the solved and true optical centres and the angle between the solved and true
@@ -28,7 +28,8 @@ sys.path.insert(0, str(ROOT))
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
-from superbody.edge.board import BoardSpec, placement_in_front, render_board  # noqa: E402
+from superbody.edge.calibration.board import BoardSpec  # noqa: E402
+from superbody.edge.calibration.render import placement_in_front, render_board  # noqa: E402
 from superbody.edge.cli import main as superbody  # noqa: E402
 from superbody.edge.site import load_site  # noqa: E402
 

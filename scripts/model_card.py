@@ -170,7 +170,7 @@ def main(out_dir: Path, card: Path) -> int:
          "samples plus all 225 dev.json samples (each repeated 20 times per epoch) and every proper subset of each sample's views "
          "(10 times per epoch: a frame three cameras saw is also three real single-view and three two-view frames, with the same truth; "
          "real detector noise for the hard camera counts).",
-         "- The simulated detector (`edge.simulator.NoiseModel`) was matched to dev.json's statistics: which joints are reported, how often, "
+         "- The simulated detector (`edge.sim.NoiseModel`) was matched to dev.json's statistics: which joints are reported, how often, "
          "with what scores, and (`FACING_VISIBILITY`) how that depends on where the person faces: from behind the nose and eyes vanish but "
          "the ears stay, side-on the far eye, ear, elbow and wrist are hidden (`scripts/sim_vs_dataset.py` prints the comparison). "
          "So even the simulation-only figures below are not entirely blind to dev.json: its detector statistics, never its poses, went in.",

@@ -13,9 +13,9 @@ import jsonschema
 import numpy as np
 import pytest
 
-from superbody.edge import wire
+from superbody.edge.messages import wire
 from superbody.edge.resources import MESSAGES, json_schema
-from superbody.edge.simulator import SimCamera, World
+from superbody.edge.sim import SimCamera, World
 from superbody.edge.site import load_site
 from superbody.host import pose as pose_msg
 from superbody.host import schemas

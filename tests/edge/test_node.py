@@ -11,12 +11,13 @@ import numpy as np
 import pytest
 import zenoh
 
-from superbody.edge import transport, wire
+from superbody.edge import transport
+from superbody.edge.messages import wire
 from superbody.edge.body import INDEX
 from superbody.edge.node import SourceSpec, box_histogram, frame_observation, parse_source
-from superbody.edge.simulator import SimCamera, World
+from superbody.edge.sim import SimCamera, World
 from superbody.edge.site import load_site
-from superbody.edge.source import Frame
+from superbody.edge.sources.source import Frame
 from tests.conftest import LAB_SITE, WTF_SITE, free_port
 from tests.edge.photos import TOLERANCE_PX, astronaut_video
 
@@ -158,9 +159,9 @@ def test_a_frame_that_cannot_be_encoded_is_skipped_not_fatal(listener):
     import numpy as np
 
     from superbody.edge.node import run_node
-    from superbody.edge.observation import PersonView
-    from superbody.edge.sim_source import SimSource
-    from superbody.edge.source import Frame
+    from superbody.edge.messages.observation import PersonView
+    from superbody.edge.sources.sim_source import SimSource
+    from superbody.edge.sources.source import Frame
 
     site = load_site(SITE)
     bad_view = PersonView(np.full((17, 3), np.nan, np.float32), np.array([5, 5, 1, 1], np.float32), np.zeros((16, 8), np.float32))

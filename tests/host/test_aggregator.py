@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment
 
-from superbody.edge import wire
+from superbody.edge.messages import wire
 from superbody.edge.angles import wrap_angle
-from superbody.edge.simulator import SimCamera, World
+from superbody.edge.sim import SimCamera, World
 from superbody.edge.site import load_site
 from superbody.host.aggregator import Aggregator, HostConfig, confidence, confidences
 from superbody.host.analytic import AnalyticEstimator
@@ -113,7 +113,7 @@ def test_late_frames_are_counted(site):
 
 
 def test_confidence_grows_with_what_was_seen():
-    from superbody.edge.observation import PersonView
+    from superbody.edge.messages.observation import PersonView
     kp = np.full((17, 3), np.nan, np.float32)
     kp[:5] = [100, 100, 0.8]
     few = PersonView(kp, np.zeros(4, np.float32), np.zeros((16, 8), np.float32))

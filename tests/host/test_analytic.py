@@ -8,7 +8,7 @@ import pytest
 
 from superbody.edge import body
 from superbody.edge.angles import wrap_angle
-from superbody.edge.simulator import NoiseModel, PersonState, World, render_views, skeleton
+from superbody.edge.sim import NoiseModel, PersonState, World, render_views, skeleton
 from superbody.edge.site import load_site
 from superbody.host.analytic import AnalyticEstimator, joints_3d, pair_points, triangulate
 from superbody.models.wtf import load_wtf

@@ -12,9 +12,10 @@ import time
 import pytest
 import zenoh
 
-from superbody.edge import transport, wire
+from superbody.edge import transport
+from superbody.edge.messages import wire
 from superbody.edge.clock import WorldClock
-from superbody.edge.simulator import SimCamera, World
+from superbody.edge.sim import SimCamera, World
 from superbody.edge.site import load_site
 from superbody.host.aggregator import Aggregator, HostConfig, run_host
 from superbody.host.analytic import AnalyticEstimator

@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment
 
-from superbody.edge import wire
-from superbody.edge.sim_source import SimSource
-from superbody.edge.simulator import SimCamera, World
+from superbody.edge.messages import wire
+from superbody.edge.sources.sim_source import SimSource
+from superbody.edge.sim import SimCamera, World
 from superbody.edge.site import load_site
 from superbody.host.aggregator import Aggregator
 from superbody.host.analytic import AnalyticEstimator

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from superbody.edge.simulator import World
+from superbody.edge.sim import World
 from superbody.edge.site import load_site
 from superbody.host import pose as pose_msg
 from superbody.host.demo import _Watcher

@@ -11,7 +11,7 @@ import pytest
 torch = pytest.importorskip("torch")
 pytest.importorskip("onnx")
 
-from superbody.edge.observation import PersonView  # noqa: E402
+from superbody.edge.messages.observation import PersonView  # noqa: E402
 from superbody.edge.site import Site, parse_site  # noqa: E402
 from superbody.host.estimator import Estimator, ModelMismatchError, OnnxEstimator, decode_output  # noqa: E402
 from superbody.host.graph import GraphSpec, build_batch  # noqa: E402

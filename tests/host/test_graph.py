@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from superbody.edge.body import INDEX, KEYPOINTS, MIRROR, NUM_KEYPOINTS, PARENT
 from superbody.edge.camera import pixel_to_ray
-from superbody.edge.observation import PersonView
+from superbody.edge.messages.observation import PersonView
 from superbody.edge.site import Site, parse_site
 from superbody.host.graph import (
     BODY_TYPE,

@@ -9,7 +9,7 @@ import pytest
 
 from superbody.edge.body import INDEX, NUM_KEYPOINTS, TYPICAL_HEIGHT_M
 from superbody.edge.camera import Camera, look_at_rotation, project
-from superbody.edge.observation import PersonView, empty_histogram
+from superbody.edge.messages.observation import PersonView, empty_histogram
 from superbody.host.ground import LEVELS, ground_point, ground_points
 
 ANKLES = (INDEX["left_ankle"], INDEX["right_ankle"])

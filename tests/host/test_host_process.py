@@ -8,8 +8,9 @@ import time
 import pytest
 import zenoh
 
-from superbody.edge import transport, wire
-from superbody.edge.simulator import SimCamera, World
+from superbody.edge import transport
+from superbody.edge.messages import wire
+from superbody.edge.sim import SimCamera, World
 from superbody.edge.site import load_site
 from superbody.host.demo import DemoConfig, run_demo
 from tests.conftest import HostWatch, WTF_SITE, free_port

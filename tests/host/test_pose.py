@@ -30,8 +30,9 @@ from superbody.host.pose import (
     encode,
     zenoh_encoding,
 )
+from tests.conftest import ROOT
 
-DOCS = Path(__file__).resolve().parents[2] / "docs" / "pose-schema.md"
+DOCS = ROOT / "docs" / "pose-schema.md"
 STAMP = 1_718_000_000_123_456_789
 
 

@@ -16,7 +16,8 @@ import time
 import pytest
 import zenoh
 
-from superbody.edge import transport, wire
+from superbody.edge import transport
+from superbody.edge.messages import wire
 from superbody.edge.site import load_site
 from superbody.host import pose as pose_msg
 from tests.conftest import WTF_SITE, free_port

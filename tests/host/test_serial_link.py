@@ -32,8 +32,9 @@ from superbody.host.serial_link import (
     pack_frame,
     unpack_frame,
 )
+from tests.conftest import ROOT
 
-DOCS = Path(__file__).resolve().parents[2] / "docs" / "pose-schema.md"
+DOCS = ROOT / "docs" / "pose-schema.md"
 STAMP = 1_718_000_000_123_456_789
 
 

@@ -8,7 +8,7 @@ import math
 
 import pytest
 
-from superbody.edge.payload import REASONS, DecodeError
+from superbody.edge.messages.payload import REASONS, DecodeError
 from superbody.host import status as hs
 
 

@@ -17,7 +17,7 @@ import pytest
 from superbody.edge.body import NUM_KEYPOINTS, TYPICAL_HEIGHT_M
 from superbody.edge.camera import Camera, look_at_rotation, project
 from superbody.edge.colour import bhattacharyya, hs_histogram
-from superbody.edge.observation import Observation, PersonView, empty_histogram
+from superbody.edge.messages.observation import Observation, PersonView, empty_histogram
 from superbody.edge.site import Site
 from superbody.host.tracker import Tracker, TrackerConfig, assign, median_colour_distance
 
@@ -663,7 +663,7 @@ def test_reset_camera_admits_a_restarted_node_at_once():
 def test_set_positions_equals_set_position_one_by_one():
     # The host's batched feedback: the same Kalman states as one call per track, unknown ids and
     # non-finite points refused per row.
-    from superbody.edge.simulator import SimCamera, World
+    from superbody.edge.sim import SimCamera, World
 
     world = World(SITE, 3, seed=2)
     cams = [SimCamera(world, cam) for cam in SITE.camera_ids]

@@ -7,7 +7,7 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from superbody.edge.observation import PersonView  # noqa: E402
+from superbody.edge.messages.observation import PersonView  # noqa: E402
 from superbody.edge.site import Site, parse_site  # noqa: E402
 from superbody.host.graph import NUM_RELATIONS, GraphSpec, build_batch, floor_centre  # noqa: E402
 from superbody.models.nets import (  # noqa: E402

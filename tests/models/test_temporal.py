@@ -12,8 +12,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from superbody.edge import transport, wire
-from superbody.edge.simulator import NoiseModel
+from superbody.edge import transport
+from superbody.edge.messages import wire
+from superbody.edge.sim import NoiseModel
 from superbody.edge.site import load_site
 from superbody.host.aggregator import HostConfig
 from superbody.host.analytic import AnalyticEstimator
