@@ -62,7 +62,7 @@ __all__ = [
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 LOOPBACK_LISTEN = "tcp/127.0.0.1:0"
-# Our largest message is a PoseArray (host.pose.MAX_PAYLOAD_BYTES, 512 KiB): 1 MiB leaves room.
+# Our largest message is a PoseArray (host.messages.pose.MAX_PAYLOAD_BYTES, 512 KiB): 1 MiB leaves room.
 MAX_MESSAGE_BYTES = 1024 * 1024
 _PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws", "unixsock-stream")
 _ENDPOINT_RE = re.compile(r"^(?P<proto>[a-z-]+)/(?P<addr>[^?#]+?)(?P<rest>[?#].*)?$")

@@ -8,66 +8,14 @@ import signal
 import sys
 import threading
 from dataclasses import replace
-from pathlib import Path
 
 from superbody.edge import transport
 from superbody.edge.cli_args import add_clock_args, clock_from_args, positive
-from superbody.edge.site import Site, SiteError, load_site
+from superbody.edge.site import SiteError, load_site
 
-__all__ = ["register", "build_estimator", "default_model"]
+__all__ = ["register"]
 
 log = logging.getLogger("superbody.host")
-
-ESTIMATORS = ("auto", "hybrid", "onnx", "analytic")
-
-
-def default_model(site: Site) -> Path | None:
-    """The shipped model for the site (package data), if there is one: ``models/<site>.fp32.onnx``,
-    else ``models/<site>.int8.onnx``. The fp32 file is the default because it is both exact and
-    the fastest (exported as the fast GAT, models.fast_gat; int8 costs more than it saves on
-    these small products: docs/scaling.md)."""
-    from superbody.edge.resources import model_path
-
-    return model_path(f"{site.name}.fp32.onnx") or model_path(f"{site.name}.int8.onnx")
-
-
-def build_estimator(site: Site, kind: str = "auto", model: str | Path | None = None):
-    """The estimator by name, and the name reported in PoseArrays.
-
-    Kinds: ``"hybrid"`` (the network fused with geometry, host.hybrid; the model must carry a
-    hybrid calibration), ``"onnx"`` (the network alone), ``"analytic"`` (geometry alone), and
-    ``"auto"``: hybrid when the model carries a calibration, else the network alone.
-
-    Raises:
-        ValueError: unknown kind (listing the valid ones), or no model for the site.
-        host.estimator.ModelMismatchError: the model does not fit the site.
-    """
-    if kind == "analytic":
-        from superbody.host.analytic import AnalyticEstimator
-
-        return AnalyticEstimator(site), "analytic"
-    if kind not in ESTIMATORS:
-        raise ValueError(f"unknown estimator {kind!r}; valid estimators: {', '.join(ESTIMATORS)}")
-    path = Path(model) if model else default_model(site)
-    if path is None:
-        raise ValueError(f"no model given and no shipped model models/{site.name}.fp32.onnx or .int8.onnx; "
-                         "pass --model M.onnx or --estimator analytic")
-    if not path.is_file():
-        raise ValueError(f"--model {path}: no such file")
-    from superbody.host.estimator import ModelMismatchError, OnnxEstimator
-    from superbody.host.hybrid import META_HYBRID, HybridEstimator
-
-    try:
-        net = OnnxEstimator(path, site)
-    except ModelMismatchError:
-        raise
-    except Exception as e:  # onnxruntime's own errors: an empty, truncated or non-ONNX file
-        why = " ".join(str(e).split())[:200]
-        raise ValueError(f"--model {path}: not a loadable ONNX model ({path.stat().st_size} bytes): {why}") from None
-    if kind == "hybrid" or (kind == "auto" and net.has_std and META_HYBRID in net.metadata):
-        return HybridEstimator(net, site), f"hybrid:{path.name}"
-    return net, f"onnx:{path.name}"
-
 
 def _unit(text: str) -> float:
     v = float(text)
@@ -77,11 +25,13 @@ def _unit(text: str) -> float:
 
 
 def _run_host(args: argparse.Namespace) -> int:
-    from superbody.host.aggregator import Aggregator, HostConfig, run_host
-    from superbody.host.estimator import ModelMismatchError
-    from superbody.host.filter import FilterConfig
+    from superbody.host.aggregator import Aggregator, HostConfig
+    from superbody.host.estimation import build_estimator
+    from superbody.host.estimation.estimator import ModelMismatchError
+    from superbody.host.filtering.pose_filter import FilterConfig
     from superbody.host.memory import pin_mmap_threshold
-    from superbody.host.tracker import TrackerConfig
+    from superbody.host.service import run_host
+    from superbody.host.tracking.config import TrackerConfig
 
     try:
         site = load_site(args.site)
@@ -93,11 +43,11 @@ def _run_host(args: argparse.Namespace) -> int:
         )
         clock = clock_from_args(args)
         conf = transport.config_from_args(args)
-        serial = None
+        sinks = []
         if args.serial:
-            from superbody.host.serial_link import SerialLink
+            from superbody.host.outputs.serial_link import SerialLink
 
-            serial = SerialLink(args.serial, args.baud)
+            sinks.append(SerialLink(args.serial, args.baud))
     except (SiteError, ValueError, ModelMismatchError, OSError) as e:
         print(f"superbody host run: error: {e}", file=sys.stderr)
         return 2
@@ -108,23 +58,23 @@ def _run_host(args: argparse.Namespace) -> int:
     ros2 = _open_ros2(args)
     if ros2 is False:
         return 2
+    if ros2 is not None:
+        sinks.append(ros2)
     try:
-        result = run_host(conf, Aggregator(site, estimator, name, config), clock, stop, args.duration, serial,
-                          on_publish=ros2[1].publish if ros2 else None)
+        result = run_host(conf, Aggregator(site, estimator, name, config), clock, stop, args.duration, sinks)
     finally:
-        if ros2:
-            ros2[1].close()
-            ros2[0].close()
+        for sink in sinks:
+            sink.close()
     log.info("host stopped: %s", result)
     return 0
 
 
 def _open_ros2(args: argparse.Namespace):
-    """``host run --ros2``: (session, host.ros2.Ros2Publisher), None without the flag, False after an error."""
+    """``host run --ros2``: its ``host.outputs.ros2.Ros2Sink``, None without the flag, False after an error."""
     if not args.ros2:
         return None
     try:
-        from superbody.host import ros2
+        from superbody.host.outputs import ros2
 
         return ros2.open_from_args(args)
     except ImportError:
@@ -140,6 +90,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     host_sub = host.add_subparsers(dest="host_command", metavar="COMMAND", required=True)
     p = host_sub.add_parser("run", help="run the aggregator: observations in, people's poses out")
     p.add_argument("--site", required=True, help="site file (TOML)")
+    from superbody.host.estimation import ESTIMATORS
+
     p.add_argument("--estimator", choices=ESTIMATORS, default="auto",
                    help="pose estimator (default auto: hybrid when the model carries a hybrid calibration, else the network alone)")
     p.add_argument("--model", help="ONNX model (default: the shipped models/<site>.fp32.onnx)")
@@ -154,7 +106,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--duration", type=positive, default=None, help="stop after this many seconds")
     add_clock_args(p)
     transport.add_session_args(p)
-    from superbody.host import ros2
+    from superbody.host.outputs import ros2
 
     ros2.add_args(p)
     p.set_defaults(func=_run_host)
@@ -163,7 +115,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     demo.register(sub)
 
-    from superbody.host import record, view
+    from superbody.host.outputs import record, view
 
     record.register(sub)
     view.register(sub)

@@ -39,7 +39,7 @@ from superbody.edge.messages import wire
 from superbody.edge.resources import site_path
 from superbody.edge.sim import SimCamera, World
 from superbody.edge.site import SiteError, load_site
-from superbody.host import pose as pose_msg
+from superbody.host.messages import pose as pose_msg
 
 __all__ = ["DemoConfig", "run_demo", "register", "stop_processes"]
 
@@ -62,7 +62,7 @@ class DemoConfig:
         clock_scale: simulated seconds per wall second.
         port: loopback port of the demo's Zenoh router; 0 picks a free one. The default, 17447, is
             not Zenoh's 7447, so a zenohd already running on the machine does not collide with it.
-        estimator: "auto", "hybrid", "onnx" or "analytic" (host.cli.build_estimator).
+        estimator: "auto", "hybrid", "onnx" or "analytic" (host.estimation.build_estimator).
         model: ONNX model (default: the shipped one for the site).
         kill_camera: a camera id to kill mid-run (fault injection), or None.
         kill_at_s: when to kill it, in simulated seconds from the start.

@@ -367,8 +367,8 @@ def _run_eval(args: argparse.Namespace) -> int:
     except (DatasetError, SiteError, ValueError) as e:  # ModelMismatchError is a ValueError
         return _fail(command, str(e))
 
-    from superbody.host.analytic import AnalyticEstimator
-    from superbody.host.hybrid import HybridEstimator
+    from superbody.host.estimation.analytic import AnalyticEstimator
+    from superbody.host.estimation.hybrid import HybridEstimator
     from superbody.models.evaluate import format_table, json_report, predict, score, write_predictions_csv
 
     # A hybrid model is also scored as its network alone, to show what the fusion adds.
@@ -465,11 +465,11 @@ def _eval_temporal(args, raw, samples, site, estimators: dict, host_names: dict,
 
 
 def _load_model(path: Path, site):
-    """The estimator the host would run on this model (``host.cli.build_estimator``, "auto": the
+    """The estimator the host would run on this model (``host.estimation.build_estimator``, "auto": the
     hybrid when the model carries its calibration); ValueError (one line) if the file is missing
     or unreadable."""
-    from superbody.host.cli import build_estimator
-    from superbody.host.estimator import ModelMismatchError
+    from superbody.host.estimation import build_estimator
+    from superbody.host.estimation.estimator import ModelMismatchError
 
     if not path.is_file():
         raise ValueError(f"--model {path}: no such file")

@@ -9,7 +9,7 @@ Writes two PNGs (matplotlib):
   training run's simulated set, same seed), the floor polygon, how many cameras see each point,
   the cameras, and (with ``--dataset``) the path the real recording walked;
 - ``error-by-cell.png``: the model's mean position and yaw error per 0.5 m floor cell, on a fresh
-  simulated test set (another seed), as the host would run it (``host.cli.build_estimator``).
+  simulated test set (another seed), as the host would run it (``host.estimation.build_estimator``).
 
 and, with ``--json-out``, the per-cell and per-camera-count figures.
 """
@@ -121,7 +121,7 @@ def coverage_figures(site: Site, train_truth: NDArray, test_truth: NDArray, test
 
 def _run(args: argparse.Namespace) -> int:
     from superbody.edge.site import SiteError, load_site
-    from superbody.host.cli import build_estimator
+    from superbody.host.estimation import build_estimator
     from superbody.models.evaluate import predict
     from superbody.models.simdata import SimDataConfig, generate
 

@@ -113,7 +113,7 @@ def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = N
         ``{"folds": [...], "reports": {"model": report, "analytic": report}, "predictions",
         "std", "analytic", ...}`` with reports as ``models.evaluate.summarise`` gives them.
     """
-    from superbody.host.estimator import OnnxEstimator
+    from superbody.host.estimation.estimator import OnnxEstimator
     from superbody.models.evaluate import score
     from superbody.models.hybrid import analytic_with_pairs
     from superbody.models.train import save
@@ -177,9 +177,9 @@ def _temporal(raw, samples, site, pred: NDArray, std: NDArray, analytic: NDArray
     """The live system on the cross-validation (module docstring): per fold, its fp32 model with the
     hybrid calibration of the other folds, the whole recording replayed through the aggregator,
     the fold's samples taken from what it publishes."""
-    from superbody.host.analytic import AnalyticEstimator
-    from superbody.host.estimator import OnnxEstimator
-    from superbody.host.hybrid import HybridEstimator
+    from superbody.host.estimation.analytic import AnalyticEstimator
+    from superbody.host.estimation.estimator import OnnxEstimator
+    from superbody.host.estimation.hybrid import HybridEstimator
     from superbody.models import hybrid
     from superbody.models.temporal import replay, view_stamps
     from superbody.models.wtf import truth_to_torso
@@ -212,7 +212,7 @@ class _TorchEstimator:
     def estimate_with_std(self, view_sets):
         import torch
 
-        from superbody.host.graph import build_batch
+        from superbody.host.estimation.graph import build_batch
         from superbody.models.nets import decode_std
 
         if not view_sets:

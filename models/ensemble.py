@@ -74,7 +74,7 @@ def load_member(path: str | Path):
     import torch
 
     from superbody.edge.site import SiteError, load_site
-    from superbody.host.graph import GraphSpec
+    from superbody.host.estimation.graph import GraphSpec
     from superbody.models.nets import build_model
 
     path = Path(path)
@@ -95,7 +95,7 @@ def load_member(path: str | Path):
 
 def calibration_graphs(site, spec, samples: int = 512, seed: int = 0) -> list:
     """Graph batches of ``samples`` people simulated in the site, for int8 calibration."""
-    from superbody.host.graph import build_batch
+    from superbody.host.estimation.graph import build_batch
     from superbody.models.simdata import SimDataConfig, generate
 
     sim = generate(site, SimDataConfig(samples=samples, seed=seed, depth=spec.use_3d), progress=False)

@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 from tqdm import tqdm
 
 from superbody.edge.angles import wrap_angle
-from superbody.host.estimator import Estimator
+from superbody.host.estimation.estimator import Estimator
 from superbody.models.samples import Sample
 from superbody.models.wtf import CAMERA_IDS, to_dataset_frame, torso_to_truth
 

@@ -1,8 +1,8 @@
 """ONNX export and int8 quantisation of the pose networks.
 
-The exported model (what ``host.estimator.OnnxEstimator`` runs)::
+The exported model (what ``host.estimation.estimator.OnnxEstimator`` runs)::
 
-    inputs   x    (batch, N, F)     float32   node features      (host.graph.build_batch)
+    inputs   x    (batch, N, F)     float32   node features      (host.estimation.graph.build_batch)
              adj  (batch, R, N, N)  float32   0/1 per relation
              mask (batch, N)        float32   1 = node present
     outputs  pose (batch, 4)        float32   (x, y, sin yaw, cos yaw), x and y in metres
@@ -11,7 +11,7 @@ The exported model (what ``host.estimator.OnnxEstimator`` runs)::
 The network's normalised output is scaled back to metres inside the graph; ``pose[:, :2]`` is
 in the frame named by the metadata key ``pose.frame``: "world" for "site" models (the origin
 is baked in too), "floor_centre" for "rays" models (add the serving site's
-``host.graph.floor_centre``). sin and cos are the network's raw outputs (not renormalised);
+``host.estimation.graph.floor_centre``). sin and cos are the network's raw outputs (not renormalised);
 yaw = atan2(sin, cos).
 
 Metadata (``metadata_props``, all strings): the GraphSpec (``graph.*``), ``pose.frame``,
@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 from onnxruntime.quantization import CalibrationDataReader, CalibrationMethod, QuantFormat, QuantType, quantize_static
 from onnxruntime.quantization.shape_inference import quant_pre_process
 
-from superbody.host.estimator import (
+from superbody.host.estimation.estimator import (
     INPUT_NAMES,
     META_MODEL_CONFIG,
     META_POSE_FRAME,
@@ -51,7 +51,7 @@ from superbody.host.estimator import (
     OUTPUT_NAME,
     STD_OUTPUT_NAME,
 )
-from superbody.host.graph import GraphBatch, GraphSpec
+from superbody.host.estimation.graph import GraphBatch, GraphSpec
 from superbody.models.fast_gat import FastGAT
 from superbody.models.nets import GAT, PoseNet, build_model
 
@@ -178,7 +178,7 @@ def export_onnx(model: PoseNet | Sequence[PoseNet], spec: GraphSpec, config: Map
         path: the .onnx file to write.
         opset: ONNX opset.
         fast: export a GAT as ``models.fast_gat.FastGAT``: the same outputs on the graphs
-            ``host.graph.build_batch`` makes, 3-5x faster; it reads the graph's edges from
+            ``host.estimation.graph.build_batch`` makes, 3-5x faster; it reads the graph's edges from
             ``mask`` (``adj`` stays an input, unread: metadata ``model.reads_adj`` "false").
             Other architectures export as they are.
 
@@ -392,7 +392,7 @@ def _check_against(net: PoseNet, path: Path, spec: GraphSpec, batch: GraphBatch 
         mask[:, 0] = 1.0
         mask[:, 1 :: 18] = 1.0  # body nodes present
         x = (rng.normal(size=(16, spec.num_nodes, spec.num_features)) * mask[:, :, None]).astype(np.float32)
-        from superbody.host.graph import masked_adjacency
+        from superbody.host.estimation.graph import masked_adjacency
 
         batch = GraphBatch(x=x, adj=masked_adjacency(spec, mask), mask=mask)
     opts = ort.SessionOptions()

@@ -1,10 +1,10 @@
 """The GAT for inference: the same function, computed only where the output needs it.
 
 ``models.nets.GAT`` attends over every pair of the N = 1 + 18 S nodes in every layer, then reads
-one node, the superbody. Two facts about the superbody graph (``host.graph``) make most of that
+one node, the superbody. Two facts about the superbody graph (``host.estimation.graph``) make most of that
 work unnecessary, without changing a single output:
 
-1. **Locality.** Every edge of a graph built by ``host.graph.build_batch`` is an edge of the
+1. **Locality.** Every edge of a graph built by ``host.estimation.graph.build_batch`` is an edge of the
    spec's template (``adjacency_template``): a joint's neighbours lie in its own slot (its body
    node, parent, children, mirror joint), a body node's are its slot and the superbody, the
    superbody's are the body nodes. So each slot's 18 nodes attend over 19 keys (their slot and
@@ -20,7 +20,7 @@ shipped 3-layer, 4-slot model, the attention work drops from 3 x 73 x 73 to 72 x
 
 The module takes the trained ``GAT`` (its parameters are shared, not copied) and the same
 inputs (x, adj, mask), but does not read ``adj``: an edge is a template edge whose two ends are
-present, ``adj == host.graph.masked_adjacency(spec, mask)``, which holds for every graph
+present, ``adj == host.estimation.graph.masked_adjacency(spec, mask)``, which holds for every graph
 ``build_batch`` makes and every graph the models are trained on, not for arbitrary adjacency.
 It exists for export (``models.export``; metadata ``model.reads_adj`` "false").
 
@@ -34,7 +34,7 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
-from superbody.host.graph import SLOT_SIZE, SUPERBODY, adjacency_template
+from superbody.host.estimation.graph import SLOT_SIZE, SUPERBODY, adjacency_template
 from superbody.models.nets import _NEG, GAT, GATLayer
 
 __all__ = ["FastGAT"]
@@ -80,7 +80,7 @@ class FastGAT(nn.Module):
 
     def forward(self, x: torch.Tensor, adj: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         net, S, Q, top = self.net, self.S, SLOT_SIZE, self.top_nodes
-        # An edge is a template edge whose two ends are present (host.graph.masked_adjacency),
+        # An edge is a template edge whose two ends are present (host.estimation.graph.masked_adjacency),
         # so the attention biases come from the mask: adj is not read.
         m_slot = mask[:, 1:].reshape(-1, S, Q)  # (B, S, Q)
         m_keys = torch.cat([m_slot, mask[:, :1, None].expand(-1, S, 1)], dim=2)  # (B, S, Q+1)

@@ -1,4 +1,4 @@
-"""Calibrating the hybrid estimator (``host.hybrid``) and its uncertainties on real data.
+"""Calibrating the hybrid estimator (``host.estimation.hybrid``) and its uncertainties on real data.
 
     superbody calibrate hybrid --cv build/models/crossval-space.npz --dataset dev.json \\
         --model M.fp32.onnx --model M.int8.onnx
@@ -40,8 +40,8 @@ from numpy.typing import NDArray
 
 from superbody.edge.angles import wrap_angle
 from superbody.edge.site import Site
-from superbody.host.estimator import META_STD_SCALE
-from superbody.host.hybrid import META_HYBRID, HybridCalibration, combine, fuse
+from superbody.host.estimation.estimator import META_STD_SCALE
+from superbody.host.estimation.hybrid import META_HYBRID, HybridCalibration, combine, fuse
 from superbody.models.samples import Sample
 
 __all__ = ["robust_sigma", "fit_std_scale", "scaled_std", "fit_trust", "TRUST_GRID", "POSITION_SE", "fit_analytic", "fit_net_bias", "NET_DEBIAS", "fit_calibration", "hybrid_poses", "leave_one_fold_out", "sigma_coverage", "write_calibration"]
@@ -164,7 +164,7 @@ def fit_analytic(analytic: NDArray, pair: NDArray, truth: NDArray, cameras: NDAr
 def hybrid_poses(
     net: NDArray, net_std: NDArray, analytic: NDArray, pair: NDArray, cameras: NDArray, calibration: HybridCalibration, site: Site,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.str_]]:
-    """What ``host.hybrid.HybridEstimator`` does, on arrays (for offline scoring): ``host.hybrid.combine``."""
+    """What ``host.estimation.hybrid.HybridEstimator`` does, on arrays (for offline scoring): ``host.estimation.hybrid.combine``."""
     return combine(net, net_std, analytic, pair, cameras, calibration, site)
 
 
@@ -262,7 +262,7 @@ def sigma_coverage(pred: NDArray, std: NDArray, truth: NDArray) -> dict[str, lis
 
 def analytic_with_pairs(samples: Sequence[Sample], site: Site) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """The analytic estimator's poses and pair flags on samples."""
-    from superbody.host.analytic import AnalyticEstimator
+    from superbody.host.estimation.analytic import AnalyticEstimator
 
     return AnalyticEstimator(site).estimate_with_pairs([s.views for s in samples])
 

@@ -1,6 +1,6 @@
 """The pose networks: GAT, RGCN and the paper's MLP baseline, on dense superbody graphs.
 
-Every model takes the tensors of ``host.graph.build_batch`` and returns the normalised pose of
+Every model takes the tensors of ``host.estimation.graph.build_batch`` and returns the normalised pose of
 each person, read at the superbody node (node 0)::
 
     x    (B, N, F) node features       adj  (B, R, N, N) 0/1, adj[b, r, i, j]: edge j -> i
@@ -35,8 +35,8 @@ import torch.nn.functional as F
 from numpy.typing import NDArray
 
 from superbody.edge.site import Site
-from superbody.host.estimator import decode_output
-from superbody.host.graph import SLOT_SIZE, SUPERBODY, GraphSpec, floor_centre
+from superbody.host.estimation.estimator import decode_output
+from superbody.host.estimation.graph import SLOT_SIZE, SUPERBODY, GraphSpec, floor_centre
 
 __all__ = [
     "OUT_DIM",
@@ -333,7 +333,7 @@ def build_model(arch: Arch, spec: GraphSpec, **hparams: object) -> PoseNet:
         **hparams: the architecture's hyper-parameters (GAT: hidden, heads, layers; RGCN:
             hidden, bases, layers; MLP: hidden, slot_dim) and the output normalisation
             (scale: metres, default 4; origin: (x, y) of the training site's floor centre for
-            "site" models, e.g. ``host.graph.floor_centre(site)``).
+            "site" models, e.g. ``host.estimation.graph.floor_centre(site)``).
 
     Raises:
         ValueError: unknown arch (the message lists the valid ones) or hyper-parameter.

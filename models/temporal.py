@@ -1,9 +1,9 @@
 """Temporal evaluation: replay a recording through the host's own aggregator and score what it publishes.
 
 ``superbody eval`` scores each sample on its own (per frame). The live system does more: the
-tracker (host.tracker) keeps people over time, the estimator sees each person's set S (the
+tracker (host.tracking.tracker) keeps people over time, the estimator sees each person's set S (the
 latest fresh view per camera, possibly from different instants) and the Kalman filter
-(host.filter) smooths the result (it takes each estimate at the mean capture time of its views
+(host.filtering.pose_filter) smooths the result (it takes each estimate at the mean capture time of its views
 and predicts the pose on to the newest view's time). ``replay`` runs exactly that code, in-process, with the world
 clock injected:
 
@@ -58,7 +58,7 @@ from superbody.edge.colour import HIST_BINS
 from superbody.edge.messages.observation import Observation, PersonView
 from superbody.edge.site import Site
 from superbody.host.aggregator import Aggregator, HostConfig
-from superbody.host.estimator import Estimator
+from superbody.host.estimation.estimator import Estimator
 from superbody.models.evaluate import sample_errors
 from superbody.models.samples import Sample
 from superbody.models.wtf import RawSample, torso_to_truth

@@ -38,7 +38,7 @@ from tqdm import tqdm
 
 from superbody.edge.angles import wrap_angle
 from superbody.edge.site import Site, SiteError, load_site
-from superbody.host.graph import GraphBatch, GraphSpec, adjacency_template, build_batch, floor_centre, masked_adjacency
+from superbody.host.estimation.graph import GraphBatch, GraphSpec, adjacency_template, build_batch, floor_centre, masked_adjacency
 from superbody.models.samples import Sample
 
 __all__ = ["TrainConfig", "TrainResult", "train", "prepare", "view_subsets", "register"]

@@ -152,13 +152,13 @@ def main(out_dir: Path, card: Path) -> int:
          "2D (RGB-only) features: the paper's 25 (node type, camera one-hot, normalised pixel, score) plus 2 geometry features "
          "per node (where the joint's ray meets its typical height, floor-centred) = 27. Outputs: torso centre (x, y) and (sin, cos) yaw, "
          "and the network's own 1-sigma of x, y (a Gaussian head) and yaw (a von Mises head), trained on a detached copy so that it never moves the pose.",
-         "- **The host runs it as a hybrid** (`host/hybrid.py`): per person, the network's pose and the analytic (triangulation) pose are fused "
+         "- **The host runs it as a hybrid** (`host/estimation/hybrid.py`): per person, the network's pose and the analytic (triangulation) pose are fused "
          "by inverse variance; the network's sigmas are scaled per camera count to its errors on held-out real data, its typical y error "
          "there (about +0.1 m with three cameras in every floor region, `models.hybrid.NET_DEBIAS`) is subtracted from its y, the geometry's sigmas are "
          "measured per camera count on dev.json (as is the geometry's typical yaw error, a few degrees, which is subtracted from its yaw), "
          "and a trust factor per camera count and axis (fitted on held-out predictions) says how much of "
          "the network's weight its real errors have earned (for position, only what beats geometry by more than a standard error of that "
-         "fit). The geometry's yaw takes each shoulder and hip line from the cameras that saw both of its ends (`host/analytic.py`). "
+         "fit). The geometry's yaw takes each shoulder and hip line from the cameras that saw both of its ends (`host/estimation/analytic.py`). "
          "Outside the floor it was trained on, the host uses geometry. Each published person "
          "says which (`estimator`: hybrid, onnx, analytic), and the filter takes the fused sigma as its measurement noise.",
          "- `site-independent.int8.onnx` / `.fp32.onnx`: the same network on world-ray features (any camera layout, up to 4 views per person), "

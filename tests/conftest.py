@@ -69,7 +69,7 @@ class HostWatch:
                      session.declare_subscriber(transport.host_status_key(site), self._status)]
 
     def _people(self, sample) -> None:
-        from superbody.host import pose as pose_msg
+        from superbody.host.messages import pose as pose_msg
 
         with self.cv:
             self.arrays.append(pose_msg.decode(sample.payload.to_bytes()))

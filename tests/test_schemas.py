@@ -17,9 +17,9 @@ from superbody.edge.messages import wire
 from superbody.edge.resources import MESSAGES, json_schema
 from superbody.edge.sim import SimCamera, World
 from superbody.edge.site import load_site
-from superbody.host import pose as pose_msg
-from superbody.host import schemas
-from superbody.host import status as host_status
+from superbody.host.messages import pose as pose_msg
+from superbody.host.messages import schemas
+from superbody.host.messages import status as host_status
 from tests.conftest import ROOT, WTF_SITE
 
 
@@ -92,11 +92,11 @@ def test_invalid_documents_fail(message, change, why):
 
 @pytest.mark.parametrize("message", sorted(MESSAGES))
 def test_shipped_schemas_are_generated_from_the_types(message):
-    """docs/schemas/ holds exactly what the generator writes (run python -m superbody.host.schemas --write),
+    """docs/schemas/ holds exactly what the generator writes (run python -m superbody.host.messages.schemas --write),
     and the package data is that file."""
     text = schemas.render(message)
     shipped = ROOT / "docs" / "schemas" / schemas.FILES[message]
-    assert shipped.read_text(encoding="utf-8") == text, f"{shipped} is out of date: run python -m superbody.host.schemas --write"
+    assert shipped.read_text(encoding="utf-8") == text, f"{shipped} is out of date: run python -m superbody.host.messages.schemas --write"
     assert json_schema(message) == text.encode("utf-8")
     assert schemas.main([]) == 0
 

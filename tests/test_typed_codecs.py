@@ -1,6 +1,6 @@
 """The typed codecs agree with the rule-by-rule validators they stand in front of.
 
-``edge.messages.wire`` and ``host.pose`` decode a payload with msgspec structs and a few vectorised
+``edge.messages.wire`` and ``host.messages.pose`` decode a payload with msgspec structs and a few vectorised
 checks (``_typed_decode``) and send whatever that path refuses to the validator that names the
 violation (``_observation``, ``_pose_array``). These property tests hold the two to each other:
 the typed path never accepts what the validator rejects, returns exactly what the validator
@@ -23,10 +23,10 @@ from hypothesis import strategies as st
 from superbody.edge.messages import wire
 from superbody.edge.messages.observation import Observation, PersonView
 from superbody.edge.messages.payload import DecodeError, parse_json, typed_input
-from superbody.host import pose as pose_msg
-from superbody.host.pose import PersonPose, PoseArray
-from tests.edge import test_wire as tw
-from tests.host import test_pose as tp
+from superbody.host.messages import pose as pose_msg
+from superbody.host.messages.pose import PersonPose, PoseArray
+from tests.edge.messages import test_wire as tw
+from tests.host.messages import test_pose as tp
 
 # --- decoders ------------------------------------------------------------------------------
 

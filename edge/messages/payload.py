@@ -1,4 +1,4 @@
-"""Validation shared by every superbody JSON message codec (``edge/messages/wire.py``, ``host/pose.py``).
+"""Validation shared by every superbody JSON message codec (``edge/messages/wire.py``, ``host/messages/pose.py``).
 
 A codec's ``decode`` calls ``parse_json`` for the bytes, then ``check_message`` for the
 schema, version and top-level fields, then the ``check_*`` functions for each value. All of them

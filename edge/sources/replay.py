@@ -1,7 +1,7 @@
 """A ``superbody record`` MCAP file replayed as one camera's frame source.
 
 ``superbody edge run --site S --camera ID --source replay:F.mcap`` re-publishes the
-Observations that camera published while the file was recorded (host/record.py), with their
+Observations that camera published while the file was recorded (host/outputs/record.py), with their
 original timing:
 
 - it reads the channel ``superbody/<site>/cameras/<ID>/observations``, decodes each message with

@@ -22,7 +22,7 @@ from superbody.edge import transport
 from superbody.edge.messages import wire
 from superbody.edge.sim import SimCamera, World
 from superbody.edge.site import load_site
-from superbody.host import pose as pose_msg
+from superbody.host.messages import pose as pose_msg
 from tests.conftest import ROOT, WTF_SITE, free_port
 
 SITE = load_site(WTF_SITE)

@@ -14,8 +14,8 @@ from superbody.edge.angles import wrap_angle
 from superbody.edge.sim import SimCamera, World
 from superbody.edge.site import load_site
 from superbody.host.aggregator import Aggregator, HostConfig, confidence, confidences
-from superbody.host.analytic import AnalyticEstimator
-from superbody.host import pose as pose_msg
+from superbody.host.estimation.analytic import AnalyticEstimator
+from superbody.host.messages import pose as pose_msg
 from tests.conftest import WTF_SITE
 
 T0 = 1_700_000_000 * 10**9
@@ -166,7 +166,7 @@ def test_a_person_out_of_every_live_camera_for_seconds_keeps_their_id(site, star
     windows of the world's 600 s plan where a person stood where only camera 3 could see them
     for longer than remove_after_s; they used to come back under a new id (a fourth track and
     an identity switch)."""
-    from superbody.host.cli import build_estimator
+    from superbody.host.estimation import build_estimator
 
     estimator, _ = build_estimator(site, "onnx")
     world = World(site, 3, seed=7)

@@ -13,13 +13,15 @@ import pytest
 import zenoh
 
 from superbody.edge import transport
-from superbody.edge.messages import wire
 from superbody.edge.clock import WorldClock
+from superbody.edge.messages import wire
 from superbody.edge.sim import SimCamera, World
 from superbody.edge.site import load_site
-from superbody.host.aggregator import Aggregator, HostConfig, run_host
-from superbody.host.analytic import AnalyticEstimator
-from superbody.host.pose import MAX_PEOPLE
+from superbody.host.aggregator import Aggregator, HostConfig
+from superbody.host.estimation.analytic import AnalyticEstimator
+from superbody.host.messages.pose import MAX_PEOPLE
+from superbody.host.outputs import CallbackSink
+from superbody.host.service import run_host
 from tests.conftest import WTF_SITE, free_port
 
 SITE = load_site(WTF_SITE)
@@ -35,7 +37,7 @@ class HostThread:
         self.cv = threading.Condition()
         self.stop = threading.Event()
         conf = transport.session_config("peer", connect=[], listen=[self.endpoint])
-        self.thread = threading.Thread(target=lambda: run_host(conf, self.agg, WorldClock(), self.stop, on_publish=self._on), daemon=True)
+        self.thread = threading.Thread(target=lambda: run_host(conf, self.agg, WorldClock(), self.stop, sinks=[CallbackSink(self._on)]), daemon=True)
 
     def _on(self, arr) -> None:
         with self.cv:

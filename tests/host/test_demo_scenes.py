@@ -22,7 +22,7 @@ from superbody.edge.sources.sim_source import SimSource
 from superbody.edge.sim import SimCamera, World
 from superbody.edge.site import load_site
 from superbody.host.aggregator import Aggregator
-from superbody.host.analytic import AnalyticEstimator
+from superbody.host.estimation.analytic import AnalyticEstimator
 from tests.conftest import WTF_SITE
 
 S = 1_000_000_000

@@ -9,7 +9,7 @@ import numpy as np
 
 from superbody.edge.sim import World
 from superbody.edge.site import load_site
-from superbody.host import pose as pose_msg
+from superbody.host.messages import pose as pose_msg
 from superbody.host.demo import _Watcher
 from tests.conftest import WTF_SITE
 

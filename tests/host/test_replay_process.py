@@ -30,7 +30,7 @@ import zenoh
 from superbody.edge import transport
 from superbody.edge.sources.replay import scan_recording
 from superbody.edge.site import load_site
-from superbody.host import pose as pose_msg
+from superbody.host.messages import pose as pose_msg
 from tests.conftest import HostWatch, WTF_SITE, free_port
 
 SITE = str(WTF_SITE)

@@ -51,8 +51,8 @@ torch = pytest.importorskip("torch")
 
 def test_exported_ensemble_equals_combining_its_members_exported_alone(tmp_path):
     from superbody.edge.site import load_site
-    from superbody.host.estimator import OnnxEstimator
-    from superbody.host.graph import GraphSpec, floor_centre
+    from superbody.host.estimation.estimator import OnnxEstimator
+    from superbody.host.estimation.graph import GraphSpec, floor_centre
     from superbody.models.export import META_ENSEMBLE, export_onnx, load_onnx_model, read_metadata
     from superbody.models.nets import build_model
     from superbody.models.simdata import SimDataConfig, generate
@@ -92,7 +92,7 @@ def test_ensemble_command_exports_fp32_and_int8_from_checkpoints(tmp_path):
     assert r.returncode == 0, r.stderr[-2000:]
     assert "an ensemble of 2 gat networks" in r.stdout
     from superbody.edge.site import load_site
-    from superbody.host.estimator import OnnxEstimator
+    from superbody.host.estimation.estimator import OnnxEstimator
     from superbody.models.simdata import SimDataConfig, generate
 
     site = load_site(WTF_SITE)

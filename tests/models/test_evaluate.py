@@ -13,8 +13,8 @@ import pytest
 
 from superbody.edge.angles import wrap_angle
 from superbody.edge.site import load_site
-from superbody.host.analytic import AnalyticEstimator
-from superbody.host.graph import GraphSpec, floor_centre
+from superbody.host.estimation.analytic import AnalyticEstimator
+from superbody.host.estimation.graph import GraphSpec, floor_centre
 from superbody.models.evaluate import (
     PREDICTIONS_HEADER,
     evaluate,

@@ -7,7 +7,7 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from superbody.host.graph import GraphSpec, build_batch  # noqa: E402
+from superbody.host.estimation.graph import GraphSpec, build_batch  # noqa: E402
 from superbody.models.fast_gat import FastGAT  # noqa: E402
 from superbody.models.nets import build_model  # noqa: E402
 from tests.models.test_export import SITE, people  # noqa: E402
@@ -52,7 +52,7 @@ def test_reexport_gives_the_same_poses_and_keeps_the_metadata(tmp_path):
     # GAT: the host's estimator, which then feeds no edges, gives the same poses and sigmas.
     import onnx
 
-    from superbody.host.estimator import OnnxEstimator
+    from superbody.host.estimation.estimator import OnnxEstimator
     from superbody.models.export import export_onnx, read_metadata, reexport
 
     torch.manual_seed(0)

@@ -11,7 +11,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from superbody.edge.site import load_site  # noqa: E402
-from superbody.host.hybrid import fuse  # noqa: E402
+from superbody.host.estimation.hybrid import fuse  # noqa: E402
 from superbody.models.crossval import spatial_folds  # noqa: E402
 from superbody.models.hybrid import NET_DEBIAS, TRUST_GRID, fit_analytic, fit_calibration, fit_net_bias, fit_std_scale, fit_trust, hybrid_poses, leave_one_fold_out, robust_sigma, scaled_std, sigma_coverage  # noqa: E402
 from superbody.models.nets import pose_nll  # noqa: E402

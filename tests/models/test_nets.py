@@ -9,7 +9,7 @@ torch = pytest.importorskip("torch")
 
 from superbody.edge.messages.observation import PersonView  # noqa: E402
 from superbody.edge.site import Site, parse_site  # noqa: E402
-from superbody.host.graph import NUM_RELATIONS, GraphSpec, build_batch, floor_centre  # noqa: E402
+from superbody.host.estimation.graph import NUM_RELATIONS, GraphSpec, build_batch, floor_centre  # noqa: E402
 from superbody.models.nets import (  # noqa: E402
     OUT_DIM,
     ARCHS,

@@ -17,8 +17,8 @@ from superbody.edge.messages import wire
 from superbody.edge.sim import NoiseModel
 from superbody.edge.site import load_site
 from superbody.host.aggregator import HostConfig
-from superbody.host.analytic import AnalyticEstimator
-from superbody.host.filter import FilterConfig
+from superbody.host.estimation.analytic import AnalyticEstimator
+from superbody.host.filtering.pose_filter import FilterConfig
 from superbody.models.evaluate import PREDICTIONS_HEADER, predict, score, write_predictions_csv
 from superbody.models.temporal import (
     SIGNATURE,

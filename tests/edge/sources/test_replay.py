@@ -20,7 +20,7 @@ from superbody.edge.sources.replay import ReplaySource, scan_recording
 from superbody.edge.sim import SimCamera, World
 from superbody.edge.site import load_site
 from superbody.edge.sources.source import SourceError
-from superbody.host.record import Recorder
+from superbody.host.outputs.record import Recorder
 from tests.conftest import LAB_SITE, WTF_SITE
 from tests.edge.test_node import _cli
 

@@ -1,0 +1,68 @@
+"""Pose estimators: a person's views in, floor position and torso yaw out.
+
+- ``estimator.py``: the ``Estimator`` protocol and the network on onnxruntime (``OnnxEstimator``);
+- ``graph.py``: the superbody graph the network reads;
+- ``analytic.py``: geometry alone (triangulated ground point, shoulder and hip lines);
+- ``hybrid.py``: the network fused with geometry, as the model's calibration says.
+
+This module is the registry: ``build_estimator(site, name, model)`` by name, and
+``default_model(site)``, the shipped model of a site.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from superbody.edge.site import Site
+
+__all__ = ["ESTIMATORS", "default_model", "build_estimator"]
+
+ESTIMATORS = ("auto", "hybrid", "onnx", "analytic")
+
+
+def default_model(site: Site) -> Path | None:
+    """The shipped model for the site (package data), if there is one: ``models/<site>.fp32.onnx``,
+    else ``models/<site>.int8.onnx``. The fp32 file is the default because it is both exact and
+    the fastest (exported as the fast GAT, models.fast_gat; int8 costs more than it saves on
+    these small products: docs/scaling.md)."""
+    from superbody.edge.resources import model_path
+
+    return model_path(f"{site.name}.fp32.onnx") or model_path(f"{site.name}.int8.onnx")
+
+
+def build_estimator(site: Site, kind: str = "auto", model: str | Path | None = None):
+    """The estimator by name, and the name reported in PoseArrays.
+
+    Kinds: ``"hybrid"`` (the network fused with geometry, host.estimation.hybrid; the model must carry a
+    hybrid calibration), ``"onnx"`` (the network alone), ``"analytic"`` (geometry alone), and
+    ``"auto"``: hybrid when the model carries a calibration, else the network alone.
+
+    Raises:
+        ValueError: unknown kind (listing the valid ones), or no model for the site.
+        host.estimation.estimator.ModelMismatchError: the model does not fit the site.
+    """
+    if kind == "analytic":
+        from superbody.host.estimation.analytic import AnalyticEstimator
+
+        return AnalyticEstimator(site), "analytic"
+    if kind not in ESTIMATORS:
+        raise ValueError(f"unknown estimator {kind!r}; valid estimators: {', '.join(ESTIMATORS)}")
+    path = Path(model) if model else default_model(site)
+    if path is None:
+        raise ValueError(f"no model given and no shipped model models/{site.name}.fp32.onnx or .int8.onnx; "
+                         "pass --model M.onnx or --estimator analytic")
+    if not path.is_file():
+        raise ValueError(f"--model {path}: no such file")
+    from superbody.host.estimation.estimator import ModelMismatchError, OnnxEstimator
+    from superbody.host.estimation.hybrid import META_HYBRID, HybridEstimator
+
+    try:
+        net = OnnxEstimator(path, site)
+    except ModelMismatchError:
+        raise
+    except Exception as e:  # onnxruntime's own errors: an empty, truncated or non-ONNX file
+        why = " ".join(str(e).split())[:200]
+        raise ValueError(f"--model {path}: not a loadable ONNX model ({path.stat().st_size} bytes): {why}") from None
+    if kind == "hybrid" or (kind == "auto" and net.has_std and META_HYBRID in net.metadata):
+        return HybridEstimator(net, site), f"hybrid:{path.name}"
+    return net, f"onnx:{path.name}"

@@ -1,0 +1,327 @@
+"""The temporal filter: a constant-velocity Kalman filter on each person's (x, y, yaw).
+
+``PoseFilter`` holds one person's state; the maths is ``host.filtering.kalman``'s per-axis
+constant-velocity step (the three axes never mix), run for a batch of people at once.
+
+State: (x, y, yaw, vx, vy, yaw_rate); yaw is kept wrapped to (-pi, pi] and each yaw measurement
+is unwrapped next to the state first, so a person turning through +-pi gives a small innovation.
+Process noise: piecewise-constant white acceleration (Bar-Shalom), per axis
+
+    Q = sigma_a^2 [[dt^4/4, dt^3/2], [dt^3/2, dt^2]]
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from superbody.edge.angles import wrap_angle
+from superbody.host.filtering.kalman import AxisCov, cv_predict, cv_update
+
+__all__ = ["FilterConfig", "FilteredPose", "PoseFilter", "update_many", "predict_many"]
+
+_NS = 1e-9
+_AX = np.arange(3)  # state indices of x, y, yaw
+_RATE = _AX + 3  # and of their rates
+
+
+def _check(name: str, value: float, lo: float, hi: float, lo_open: bool = True) -> None:
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if not (ok and (lo < value if lo_open else lo <= value) and value <= hi):
+        raise ValueError(f"FilterConfig.{name} must be in {'(' if lo_open else '['}{lo}, {hi}], got {value!r}")
+
+
+@dataclass(frozen=True)
+class FilterConfig:
+    """Noise model of a walking person and the filter's switches.
+
+    Attributes:
+        enabled: False passes measurements through (per-frame output, finite-difference rates).
+        meas_std_xy_m: default 1-sigma of a position measurement, metres.
+        meas_std_yaw_rad: default 1-sigma of a yaw measurement, radians.
+        accel_std_mps2: 1-sigma of a person's acceleration (starting, stopping), m/s^2. Larger
+            than a walk's own (about 0.5 m/s^2 over 0.2 s on dev.json's tracker): 3 had the least
+            position error of 1.5, 2, 2.5, 3, 4 and 6 with the shipped hybrid on eight simulated
+            30 s recordings (exact truth; ``python benchmarks/filter_tuning.py``), and it also
+            lowers the live error on dev.json's spatial cross-validation (models/MODEL_CARD.md).
+            A likely reason: successive estimates share views (set S keeps each camera's latest
+            one), so their errors are not independent, and a filter that takes them as
+            independent trusts its past too much and lags.
+        yaw_accel_std_radps2: 1-sigma of torso angular acceleration, rad/s^2.
+        init_speed_std_mps: 1-sigma of the unknown speed at the first measurement, m/s.
+        init_yaw_rate_std_radps: 1-sigma of the unknown yaw rate at the first measurement.
+        reset_after_s: a gap longer than this between measurements restarts the filter.
+    """
+
+    enabled: bool = True
+    meas_std_xy_m: float = 0.1
+    meas_std_yaw_rad: float = math.radians(10.0)
+    accel_std_mps2: float = 3.0
+    yaw_accel_std_radps2: float = 5.0
+    init_speed_std_mps: float = 1.0
+    init_yaw_rate_std_radps: float = 2.0
+    reset_after_s: float = 2.0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.enabled, bool):
+            raise ValueError(f"FilterConfig.enabled must be true or false, got {self.enabled!r}")
+        _check("meas_std_xy_m", self.meas_std_xy_m, 0.0, 10.0)
+        _check("meas_std_yaw_rad", self.meas_std_yaw_rad, 0.0, math.pi)
+        _check("accel_std_mps2", self.accel_std_mps2, 0.0, 100.0)
+        _check("yaw_accel_std_radps2", self.yaw_accel_std_radps2, 0.0, 1000.0)
+        _check("init_speed_std_mps", self.init_speed_std_mps, 0.0, 100.0)
+        _check("init_yaw_rate_std_radps", self.init_yaw_rate_std_radps, 0.0, 100.0)
+        _check("reset_after_s", self.reset_after_s, 0.0, 3600.0)
+
+
+@dataclass(frozen=True, eq=False)
+class FilteredPose:
+    """One person's filtered pose at one time.
+
+    Attributes:
+        stamp_ns: the time it holds for, UNIX nanoseconds.
+        x, y: floor position, metres (REP-103).
+        yaw: torso yaw, radians in (-pi, pi].
+        vx, vy: velocity, m/s.
+        yaw_rate: rad/s, counter-clockwise positive.
+        cov: (3, 3) covariance of (x, y, yaw).
+    """
+
+    stamp_ns: int
+    x: float
+    y: float
+    yaw: float
+    vx: float
+    vy: float
+    yaw_rate: float
+    cov: NDArray[np.float64]
+
+
+# State layout: (x, y, yaw, vx, vy, yaw_rate); position i's velocity is at i + 3.
+
+
+class PoseFilter:
+    """Constant-velocity Kalman filter on one person's (x, y, yaw), fed with time stamps.
+
+    Measurements older than the state are ignored (counted in ``ignored``); a gap longer than
+    ``config.reset_after_s`` restarts the filter from the new measurement.
+    """
+
+    def __init__(self, config: FilterConfig | None = None) -> None:
+        self.config = config or FilterConfig()
+        self.ignored = 0
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the state; the next measurement starts afresh."""
+        self._t: int | None = None
+        self._x = np.zeros(6)  # (6,) state
+        self._P = np.eye(6)  # (6, 6) covariance
+
+    @property
+    def stamp_ns(self) -> int | None:
+        """Time of the state, or None before the first measurement."""
+        return self._t
+
+    def update(self, t_ns: int, x: float, y: float, yaw: float, meas_std: tuple[float, float, float] | None = None) -> FilteredPose:
+        """Add one measurement and return the filtered pose at ``t_ns``.
+
+        Args:
+            t_ns: capture time, UNIX nanoseconds.
+            x, y: measured floor position, metres.
+            yaw: measured torso yaw, radians (any range; it is wrapped).
+            meas_std: (std_x m, std_y m, std_yaw rad) of this measurement; the config's by default.
+
+        Raises:
+            ValueError: a non-finite input or a non-positive std.
+        """
+        for name, v in (("x", x), ("y", y), ("yaw", yaw)):
+            if not math.isfinite(v):
+                raise ValueError(f"PoseFilter.update: {name} must be finite, got {v!r}")
+        if meas_std is None:
+            c = self.config
+            std = (c.meas_std_xy_m, c.meas_std_xy_m, c.meas_std_yaw_rad)
+        else:
+            std = tuple(float(s) for s in meas_std)
+            if len(std) != 3 or not all(math.isfinite(s) and s > 0 for s in std):
+                raise ValueError(f"PoseFilter.update: meas_std must be 3 finite positive stds (x m, y m, yaw rad), got {meas_std!r}")
+        t_ns = int(t_ns)
+        yaw = float(wrap_angle(float(yaw)))
+        R = np.diag(np.square(std))  # (3, 3)
+        if self._t is not None and t_ns < self._t:
+            self.ignored += 1
+            return self._pose(self._t, self._x, self._P)
+        if self._t is None or (t_ns - self._t) * _NS > self.config.reset_after_s:
+            return self._start(t_ns, x, y, yaw, R)
+        if not self.config.enabled:
+            return self._pass_through(t_ns, x, y, yaw, R)
+        return _step([self], np.array([t_ns]), np.array([[x, y, yaw]]), np.array([std]))[0]
+
+    def predict_to(self, t_ns: int) -> FilteredPose:
+        """The pose predicted at ``t_ns`` (the state's own time if ``t_ns`` is earlier).
+
+        With the filter disabled this is the last measurement, held.
+
+        Raises:
+            RuntimeError: no measurement yet.
+        """
+        if self._t is None:
+            raise RuntimeError("PoseFilter.predict_to: no measurement yet")
+        return predict_many([self], [t_ns])[0]
+
+    def _start(self, t_ns: int, x: float, y: float, yaw: float, R: NDArray) -> FilteredPose:
+        c = self.config
+        self._t = t_ns
+        self._x = np.array([x, y, yaw, 0.0, 0.0, 0.0])
+        self._P = np.zeros((6, 6))
+        self._P[:3, :3] = R
+        self._P[3:, 3:] = np.diag([c.init_speed_std_mps**2, c.init_speed_std_mps**2, c.init_yaw_rate_std_radps**2])
+        if not c.enabled:
+            self._P[3:, 3:] = 0.0
+        return self._pose(t_ns, self._x, self._P)
+
+    def _pass_through(self, t_ns: int, x: float, y: float, yaw: float, R: NDArray) -> FilteredPose:
+        dt = (t_ns - self._t) * _NS
+        old = self._x
+        rates = old[3:]  # a repeated stamp keeps the previous rates
+        if dt > 0:
+            # Finite differences; the yaw difference wrapped, so 170 -> -170 deg is +20 deg.
+            rates = np.array([(x - old[0]) / dt, (y - old[1]) / dt, wrap_angle(yaw - old[2]) / dt])
+        self._t = t_ns
+        self._x = np.concatenate([[x, y, yaw], rates])
+        self._P = np.zeros((6, 6))
+        self._P[:3, :3] = R
+        return self._pose(t_ns, self._x, self._P)
+
+    @staticmethod
+    def _pose(t_ns: int, xs: NDArray, P: NDArray) -> FilteredPose:
+        return FilteredPose(
+            stamp_ns=t_ns, x=float(xs[0]), y=float(xs[1]), yaw=float(xs[2]),
+            vx=float(xs[3]), vy=float(xs[4]), yaw_rate=float(xs[5]), cov=P[:3, :3].copy(),
+        )
+
+
+def update_many(
+    filters: Sequence[PoseFilter], t_ns: Sequence[int], pose: NDArray, meas_std: NDArray | None = None,
+) -> list[FilteredPose]:
+    """``filters[i].update(t_ns[i], *pose[i], meas_std[i])`` for every i, the common case in one pass.
+
+    A host step updates every person it estimated: stacking the filters that take the plain
+    predict + update path (enabled, a state, a measurement neither older than it nor after a
+    reset gap) makes that one batch of 6 x 6 products instead of one small batch per person.
+    The others (first measurement, reset, late, pass-through, bad input) go through
+    ``PoseFilter.update`` one by one, which also raises on bad input exactly as it does.
+
+    Args:
+        filters: B filters (distinct).
+        t_ns: (B,) capture times, UNIX nanoseconds.
+        pose: (B, 3) measured (x, y, yaw).
+        meas_std: (B, 3) 1-sigma per measurement; a row that is not 3 finite positive numbers
+            (or None for all) means the filter's configured default.
+
+    Returns:
+        The B filtered poses, in order.
+    """
+    pose = np.asarray(pose, dtype=np.float64).reshape(-1, 3)
+    B = len(filters)
+    if len(pose) != B or len(t_ns) != B:
+        raise ValueError(f"update_many: {B} filters, {len(t_ns)} stamps and {len(pose)} poses must match")
+    ms = np.full((B, 3), np.nan) if meas_std is None else np.asarray(meas_std, dtype=np.float64).reshape(B, 3)
+    good = (np.isfinite(ms) & (ms > 0)).all(axis=1).tolist()  # (B,) rows that are a sigma; else the default
+    finite = np.isfinite(pose).all(axis=1).tolist()
+    out: list[FilteredPose | None] = [None] * B
+    batch: list[int] = []
+    for i, f in enumerate(filters):
+        t = int(t_ns[i])
+        if f.config.enabled and finite[i] and f._t is not None and f._t <= t and (t - f._t) * _NS <= f.config.reset_after_s:
+            batch.append(i)
+        else:
+            out[i] = f.update(t, float(pose[i, 0]), float(pose[i, 1]), float(pose[i, 2]), tuple(map(float, ms[i])) if good[i] else None)
+    if batch:
+        fs = [filters[i] for i in batch]
+        std = ms[batch]  # (n, 3)
+        for k, i in enumerate(batch):
+            if not good[i]:
+                c = filters[i].config
+                std[k] = (c.meas_std_xy_m, c.meas_std_xy_m, c.meas_std_yaw_rad)
+        for i, fp in zip(batch, _step(fs, np.array([int(t_ns[i]) for i in batch], dtype=np.int64), pose[batch], std)):
+            out[i] = fp
+    return out  # type: ignore[return-value]
+
+
+def predict_many(filters: Sequence[PoseFilter], t_ns: Sequence[int]) -> list[FilteredPose]:
+    """``filters[i].predict_to(t_ns[i])`` for every i, the enabled ones in one batch.
+
+    Raises:
+        RuntimeError: a filter has no measurement yet.
+    """
+    if len(filters) != len(t_ns):
+        raise ValueError(f"predict_many: {len(filters)} filters and {len(t_ns)} stamps must match")
+    if any(f._t is None for f in filters):
+        raise RuntimeError("predict_many: a filter has no measurement yet")
+    t = [max(int(ti), f._t) for f, ti in zip(filters, t_ns)]  # type: ignore[type-var]
+    batch = [i for i, f in enumerate(filters) if f.config.enabled and t[i] > f._t]  # type: ignore[operator]
+    out: list[FilteredPose | None] = [None] * len(filters)
+    if batch:
+        x, P = _predict_many([filters[i] for i in batch], np.array([t[i] for i in batch], dtype=np.int64))
+        for k, i in enumerate(batch):
+            out[i] = filters[i]._pose(t[i], x[k, :, 0], P[k])
+    # The rest are held (disabled) or already at that time.
+    return [p if p is not None else f._pose(ti, f._x, f._P) for p, f, ti in zip(out, filters, t)]
+
+
+def _axes(filters: Sequence[PoseFilter]) -> tuple[NDArray, NDArray, AxisCov, NDArray]:
+    """The filters' states as axes: positions (n, 3), rates (n, 3), their 2 x 2 covariances
+    (n, 3) each, and the acceleration variances (n, 3)."""
+    X = np.stack([f._x for f in filters])  # (n, 6)
+    P = np.stack([f._P for f in filters])  # (n, 6, 6)
+    q = np.square([(f.config.accel_std_mps2, f.config.accel_std_mps2, f.config.yaw_accel_std_radps2) for f in filters])  # (n, 3)
+    return X[:, :3], X[:, 3:], AxisCov(P[:, _AX, _AX], P[:, _AX, _RATE], P[:, _RATE, _AX], P[:, _RATE, _RATE]), q
+
+
+def _packed(pos: NDArray, rate: NDArray, cov: AxisCov) -> tuple[NDArray, NDArray]:
+    """Axes back to states (n, 6) and 6 x 6 covariances (n, 6, 6) with no cross-axis terms."""
+    P = np.zeros((len(pos), 6, 6))
+    P[:, _AX, _AX], P[:, _AX, _RATE], P[:, _RATE, _AX], P[:, _RATE, _RATE] = cov
+    return np.concatenate([pos, rate], axis=1), P
+
+
+def _predict_many(filters: Sequence[PoseFilter], t_ns: NDArray) -> tuple[NDArray, NDArray]:
+    """Each filter's state predicted to its time in ``t_ns`` (n,): x (n, 6, 1), P (n, 6, 6)."""
+    dt = ((np.asarray(t_ns, dtype=np.int64) - np.array([f._t for f in filters], dtype=np.int64)) * _NS)[:, None]  # (n, 1)
+    pos, rate, cov, q = _axes(filters)
+    pos, rate, cov = cv_predict(pos, rate, cov, dt, q)
+    pos[:, 2] = wrap_angle(pos[:, 2])
+    x, P = _packed(pos, rate, cov)
+    return x[:, :, None], P
+
+
+def _step(filters: Sequence[PoseFilter], t_ns: NDArray, pose: NDArray, std: NDArray) -> list[FilteredPose]:
+    """The plain predict + update of n filters with a state not newer than ``t_ns`` (n,), in one
+    batch: measurements ``pose`` (n, 3) of 1-sigma ``std`` (n, 3). Sets and returns their states.
+
+    ``predict`` and ``update`` with this filter's F, Q, H and R, written out per element. The
+    three axes never mix: F and Q act on each (position, rate) pair alone, H reads the positions
+    and R is diagonal, so a covariance that starts with no cross-axis terms (every path of
+    ``PoseFilter`` starts one so) keeps none, and the 6 x 6 filter is three 2 x 2 filters. Same
+    numbers (tests/host/filtering/test_pose_filter.py), without a batch of 6 x 6 products and a solve per step.
+    """
+    dt = ((np.asarray(t_ns, dtype=np.int64) - np.array([f._t for f in filters], dtype=np.int64)) * _NS)[:, None]  # (n, 1)
+    pos, rate, cov, q = _axes(filters)
+    pos, rate, cov = cv_predict(pos, rate, cov, dt, q)
+    pos[:, 2] = wrap_angle(pos[:, 2])
+    # Update with z = the measured positions, the yaw unwrapped next to the predicted yaw (the
+    # innovation stays in (-pi, pi])
+    z = np.column_stack([pose[:, 0], pose[:, 1], pos[:, 2] + wrap_angle(wrap_angle(pose[:, 2]) - pos[:, 2])])  # (n, 3)
+    pos, rate, cov = cv_update(pos, rate, cov, z, np.square(std))
+    pos[:, 2] = wrap_angle(pos[:, 2])
+    X, P = _packed(pos, rate, cov)
+    out = []
+    for k, f in enumerate(filters):
+        f._t, f._x, f._P = int(t_ns[k]), X[k], P[k]
+        out.append(f._pose(f._t, f._x, f._P))
+    return out

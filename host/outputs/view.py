@@ -1,0 +1,223 @@
+"""``superbody view``: a live 3D view of a site in Foxglove, served with the foxglove-sdk.
+
+Subscribes to the site's PoseArrays and host status on Zenoh and serves a Foxglove WebSocket
+(``ws://127.0.0.1:8765`` by default; in Foxglove: Open connection, Foxglove WebSocket) with:
+
+- ``/superbody/scene`` (``foxglove.SceneUpdate``): the floor polygon, the obstacles, each camera's
+  frustum (from the site file, re-sent every second for late joiners), and each person as an
+  arrow along their torso yaw with a label "id yaw" (each person lives 0.5 s unless renewed).
+- ``superbody/<site>/people``: the raw PoseArray (JSON, its JSON Schema).
+- ``superbody/<site>/host/status``: the raw host status (JSON, its JSON Schema).
+
+The scene's frame is the site's world frame, named after the site (REP-103: metres, z up).
+
+    superbody view [--site SITE.toml] [--ws-port 8765] [--connect tcp/10.0.0.2:7447]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import signal
+import sys
+import threading
+import time
+
+import numpy as np
+from numpy.typing import NDArray
+
+from superbody.edge import transport
+from superbody.edge.camera import Camera, pixel_to_ray
+from superbody.edge.resources import json_schema, site_path
+from superbody.edge.site import Site, SiteError, load_site
+from superbody.host.messages import pose as pose_msg
+
+__all__ = ["SCENE_TOPIC", "frustum_points", "floor_points", "static_scene", "people_scene", "run_view", "register"]
+
+log = logging.getLogger("superbody.view")
+
+SCENE_TOPIC = "/superbody/scene"
+_FRUSTUM_DEPTH_M = 1.0  # how far the drawn frustum reaches from the optical centre
+_PERSON_LIFETIME_NS = 500_000_000  # a person not renewed within this vanishes (left the room)
+_ARROW_LENGTH_M = 0.6
+_TORSO_HEIGHT_M = 1.2  # where the arrow is drawn: about a standing person's chest
+
+
+def frustum_points(cam: Camera, depth: float = _FRUSTUM_DEPTH_M) -> NDArray[np.float64]:
+    """A camera's viewing pyramid as line segments: 8 segments, shape (16, 3), world frame.
+
+    Four edges from the optical centre through the image corners to ``depth`` metres along the
+    optical axis, and the rectangle joining their ends.
+    """
+    corners = np.array([[0, 0], [cam.width, 0], [cam.width, cam.height], [0, cam.height]], dtype=np.float64)  # (4, 2)
+    origin, d = pixel_to_ray(corners, cam)  # (3,), (4, 3)
+    axis = cam.R[:, 2]  # the optical axis in the world
+    ends = origin + d * (depth / (d @ axis))[:, None]  # (4, 3) on the plane `depth` in front
+    segs = [p for e in ends for p in (origin, e)]
+    segs += [p for i in range(4) for p in (ends[i], ends[(i + 1) % 4])]
+    return np.asarray(segs)  # (16, 3)
+
+
+def floor_points(site: Site) -> NDArray[np.float64]:
+    """The floor polygon as a closed loop on z = 0, shape (N, 3)."""
+    xy = np.asarray(site.floor, dtype=np.float64)  # (N, 2)
+    return np.hstack([xy, np.zeros((len(xy), 1))])
+
+
+def _point(p):
+    from foxglove.messages import Point3
+
+    return Point3(x=float(p[0]), y=float(p[1]), z=float(p[2]))
+
+
+def _pose(x: float, y: float, z: float, yaw: float = 0.0):
+    from foxglove.messages import Pose, Quaternion, Vector3
+
+    # A rotation of `yaw` about +z: q = (0, 0, sin(yaw/2), cos(yaw/2)).
+    return Pose(position=Vector3(x=x, y=y, z=z), orientation=Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)))
+
+
+def _stamp(ns: int):
+    from foxglove.messages import Timestamp
+
+    return Timestamp(ns // 1_000_000_000, ns % 1_000_000_000)
+
+
+def static_scene(site: Site, stamp_ns: int):
+    """The site's fixed geometry as a ``foxglove.SceneUpdate``: floor, obstacles, camera frusta."""
+    from foxglove.messages import (
+        Color,
+        CubePrimitive,
+        LinePrimitive,
+        LinePrimitiveLineType,
+        SceneEntity,
+        SceneUpdate,
+        TextPrimitive,
+        Vector3,
+    )
+
+    frame, ts = site.name, _stamp(stamp_ns)
+    entities = [SceneEntity(timestamp=ts, frame_id=frame, id="floor", lines=[LinePrimitive(
+        type=LinePrimitiveLineType.LineLoop, pose=_pose(0.0, 0.0, 0.0), thickness=0.03, points=[_point(p) for p in floor_points(site)],
+        color=Color(r=0.6, g=0.6, b=0.6, a=1.0))])]
+    for o in site.obstacles:
+        lo, hi = np.asarray(o.min), np.asarray(o.max)
+        c = (lo + hi) / 2
+        entities.append(SceneEntity(timestamp=ts, frame_id=frame, id=f"obstacle-{o.name}", cubes=[CubePrimitive(
+            pose=_pose(*map(float, c)), size=Vector3(x=float(hi[0] - lo[0]), y=float(hi[1] - lo[1]), z=float(hi[2] - lo[2])),
+            color=Color(r=0.5, g=0.35, b=0.2, a=0.6))]))
+    for cam in site.cameras:
+        entities.append(SceneEntity(timestamp=ts, frame_id=frame, id=f"camera-{cam.id}", lines=[LinePrimitive(
+            type=LinePrimitiveLineType.LineList, pose=_pose(0.0, 0.0, 0.0), thickness=0.02,
+            points=[_point(p) for p in frustum_points(cam)], color=Color(r=0.2, g=0.6, b=1.0, a=1.0))],
+            texts=[TextPrimitive(pose=_pose(*map(float, cam.position)), billboard=True, font_size=14.0, scale_invariant=True,
+                                 color=Color(r=0.2, g=0.6, b=1.0, a=1.0), text=f"camera {cam.id}")]))
+    return SceneUpdate(entities=entities)
+
+
+def people_scene(arr: pose_msg.PoseArray):
+    """Each person of a PoseArray as an arrow along their yaw with an "id, yaw" label."""
+    from foxglove.messages import ArrowPrimitive, Color, Duration, SceneEntity, SceneUpdate, TextPrimitive
+
+    ts, life = _stamp(arr.stamp_ns), Duration(0, _PERSON_LIFETIME_NS)
+    entities = []
+    for p in arr.people:
+        entities.append(SceneEntity(
+            timestamp=ts, frame_id=arr.site, id=f"person-{p.id}", lifetime=life,
+            arrows=[ArrowPrimitive(pose=_pose(p.x, p.y, _TORSO_HEIGHT_M, p.yaw), shaft_length=_ARROW_LENGTH_M * 0.7, shaft_diameter=0.06,
+                                   head_length=_ARROW_LENGTH_M * 0.3, head_diameter=0.15, color=Color(r=1.0, g=0.4, b=0.1, a=1.0))],
+            texts=[TextPrimitive(pose=_pose(p.x, p.y, _TORSO_HEIGHT_M + 0.4), billboard=True, font_size=16.0, scale_invariant=True,
+                                 color=Color(r=1.0, g=1.0, b=1.0, a=1.0), text=f"{p.id}  {math.degrees(p.yaw):.0f} deg")],
+        ))
+    return SceneUpdate(entities=entities)
+
+
+def run_view(conf, site: Site, host: str, port: int, stop: threading.Event, ready: threading.Event | None = None) -> dict:
+    """Serve the live view until ``stop`` is set; returns counts of what was forwarded."""
+    import foxglove
+    import zenoh
+    from foxglove.channels import SceneUpdateChannel
+
+    server = foxglove.start_server(name=f"superbody {site.name}", host=host, port=port)
+    scene = SceneUpdateChannel(SCENE_TOPIC)
+    people_topic, status_topic = transport.people_key(site.name), transport.host_status_key(site.name)
+    people = foxglove.Channel(people_topic, schema=json.loads(json_schema("people")), message_encoding="json")
+    status = foxglove.Channel(status_topic, schema=json.loads(json_schema("status")), message_encoding="json")
+    counts = {"people": 0, "status": 0, "rejected": 0}
+
+    def on_people(sample) -> None:
+        raw = sample.payload.to_bytes()
+        try:
+            arr = pose_msg.decode(raw, expected_site=site.name)
+        except pose_msg.PoseDecodeError as e:
+            counts["rejected"] += 1
+            if counts["rejected"] <= 3:
+                log.warning("rejected PoseArray: %s", e)
+            return
+        now = time.time_ns()
+        people.log(raw, log_time=now)
+        scene.log(people_scene(arr), log_time=now)
+        counts["people"] += 1
+
+    def on_status(sample) -> None:
+        status.log(sample.payload.to_bytes(), log_time=time.time_ns())
+        counts["status"] += 1
+
+    try:
+        with zenoh.open(conf) as session:
+            subs = [session.declare_subscriber(people_topic, on_people), session.declare_subscriber(status_topic, on_status)]
+            log.info("Foxglove live view of site %s on ws://%s:%d", site.name, host, server.port)
+            if ready is not None:
+                ready.set()
+            while not stop.is_set():
+                scene.log(static_scene(site, time.time_ns()))
+                stop.wait(1.0)
+            for s in subs:
+                s.undeclare()
+    finally:
+        server.stop()
+    return counts
+
+
+def _port(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = -1
+    if not 0 <= n <= 65535:
+        raise argparse.ArgumentTypeError(f"--ws-port must be an integer in [0, 65535], got {text!r}")
+    return n
+
+
+def _run(args: argparse.Namespace) -> int:
+    try:
+        site = load_site(args.site)
+        conf = transport.config_from_args(args)
+        import foxglove  # noqa: F401  (the `view` extra)
+    except ImportError:
+        print("superbody view: error: needs the foxglove-sdk package: pip install 'superbody[view]'", file=sys.stderr)
+        return 2
+    except (SiteError, ValueError) as e:
+        print(f"superbody view: error: {e}", file=sys.stderr)
+        return 2
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    try:
+        counts = run_view(conf, site, args.ws_host, args.ws_port, stop)
+    except RuntimeError as e:  # e.g. the port is taken
+        print(f"superbody view: error: cannot serve on {args.ws_host}:{args.ws_port} ({e})", file=sys.stderr)
+        return 1
+    log.info("view stopped: %s", counts)
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("view", help="live 3D view of a site in Foxglove (floor, cameras, people as arrows)")
+    p.add_argument("--site", default=str(site_path()), help="site file (default: the shipped wtf-apartment, the demo's)")
+    p.add_argument("--ws-port", type=_port, default=8765, help="Foxglove WebSocket port (default 8765, Foxglove's default; 0: any free port)")
+    p.add_argument("--ws-host", default="127.0.0.1", help="address to serve on (default 127.0.0.1; 0.0.0.0 for other machines)")
+    transport.add_session_args(p)
+    p.set_defaults(func=_run)

@@ -1,0 +1,97 @@
+"""The tracker's parameters (``TrackerConfig``), checked when made: a bad value names its field and range."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from superbody.edge.body import NUM_KEYPOINTS
+from superbody.host.messages.pose import MAX_PEOPLE
+
+__all__ = ["TrackerConfig"]
+
+
+def _check(name: str, value: object, lo: float, hi: float, *, lo_open: bool = False, integer: bool = False) -> None:
+    kind = int if integer else (int, float)
+    ok = isinstance(value, kind) and not isinstance(value, bool) and math.isfinite(value)
+    ok = ok and (lo < value if lo_open else lo <= value) and value <= hi
+    if not ok:
+        what = "an integer" if integer else "a number"
+        raise ValueError(f"TrackerConfig.{name} must be {what} in {'(' if lo_open else '['}{lo}, {hi}], got {value!r}")
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """The tracker's parameters; defaults are the paper's values where it gives one.
+
+    Attributes:
+        confirm_after_s: a candidate becomes a person after matches spanning this long.
+        remove_after_s: a track unseen this long is removed (a person) or dropped (a candidate).
+        d_max: a view matches a track only if the median Bhattacharyya distance between its
+            histogram and the track's last ``history_q`` histograms is below this.
+        history_q: histograms kept per track (Q).
+        gate_m: a view matches a track only if its ground point lies within
+            ``gate_m + sigma`` of the track's predicted position.
+        use_geometry: False turns the gate and the geometric cost off (the paper's tracker).
+        min_joints: views with fewer visible joints are ignored.
+        min_joints_new: a view needs at least this many visible joints to start a candidate
+            (and, with ``use_geometry``, a ground point whose 1-sigma is under ``gate_m``);
+            poorer ones (a head and a hand at the image's edge) may only match existing
+            tracks: their colours come from a few pixels and their ground points from a box,
+            and a candidate started from them is usually a duplicate of someone.
+        confirm_max_gap_s: a candidate unseen longer than this restarts its confirmation clock,
+            so "2 s of matches" means 2 s of steady matches.
+        geometry_weight: weight of the normalised ground distance against the normalised
+            colour distance in the assignment cost.
+        accel_std_mps2: 1-sigma acceleration of a walking person, for the position prediction.
+        max_tracks: at most this many tracks, candidates included (see the module docstring
+            for the policy when full); at most ``host.messages.pose.MAX_PEOPLE`` so every PoseArray
+            can be published.
+        reid_window_s: a removed person is remembered this long for re-identification
+            (0 turns re-identification off).
+        reid_d_max: a new person is re-identified as a remembered one only if the median
+            Bhattacharyya distance between their colour histories is below this.
+        reid_speed_mps: ... and if the remembered person, walking at this speed, could have
+            reached (within ``gate_m``) where the new one stands.
+        restart_gap_s: a camera whose sequence number goes back is taken as restarted (its
+            frames are admitted again) after this long without frames from it, when the frame
+            after a refused one continues the new count, or after ``Tracker.reset_camera``;
+            otherwise such frames are dropped as "seq_backwards". A forged frame with a high
+            sequence number therefore costs a camera one real frame, never its view.
+    """
+
+    confirm_after_s: float = 2.0
+    remove_after_s: float = 2.0
+    d_max: float = 0.65
+    history_q: int = 10
+    gate_m: float = 1.0
+    use_geometry: bool = True
+    min_joints: int = 3
+    min_joints_new: int = 6
+    confirm_max_gap_s: float = 1.0
+    geometry_weight: float = 1.0
+    accel_std_mps2: float = 2.0
+    max_tracks: int = 64
+    reid_window_s: float = 30.0
+    reid_d_max: float = 0.6
+    reid_speed_mps: float = 1.5
+    restart_gap_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        _check("confirm_after_s", self.confirm_after_s, 0.0, 600.0)
+        _check("remove_after_s", self.remove_after_s, 0.0, 600.0, lo_open=True)
+        _check("d_max", self.d_max, 0.0, 1.0, lo_open=True)
+        _check("history_q", self.history_q, 1, 1000, integer=True)
+        _check("gate_m", self.gate_m, 0.0, 100.0, lo_open=True)
+        if not isinstance(self.use_geometry, bool):
+            raise ValueError(f"TrackerConfig.use_geometry must be true or false, got {self.use_geometry!r}")
+        _check("min_joints", self.min_joints, 0, NUM_KEYPOINTS, integer=True)
+        _check("min_joints_new", self.min_joints_new, 0, NUM_KEYPOINTS, integer=True)
+        _check("confirm_max_gap_s", self.confirm_max_gap_s, 0.0, 600.0, lo_open=True)
+        _check("geometry_weight", self.geometry_weight, 0.0, 100.0)
+        _check("accel_std_mps2", self.accel_std_mps2, 0.0, 100.0, lo_open=True)
+        _check("max_tracks", self.max_tracks, 1, MAX_PEOPLE, integer=True)
+        _check("reid_window_s", self.reid_window_s, 0.0, 3600.0)
+        _check("reid_d_max", self.reid_d_max, 0.0, 1.0, lo_open=True)
+        _check("reid_speed_mps", self.reid_speed_mps, 0.0, 100.0)
+        _check("restart_gap_s", self.restart_gap_s, 0.0, 600.0)

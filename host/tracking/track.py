@@ -1,0 +1,104 @@
+"""One tracked person (``Track``): views, colour history, position filter state, confirmation."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from superbody.edge.colour import HIST_BINS
+from superbody.edge.messages.observation import PersonView
+from superbody.host.tracking.motion import _NS_PER_S, predict_positions
+
+__all__ = ["StampedView", "Track"]
+
+_BINS = HIST_BINS[0] * HIST_BINS[1]
+
+
+class StampedView(NamedTuple):
+    """A view and the capture time of its frame (UNIX ns)."""
+
+    stamp_ns: int
+    view: PersonView
+
+
+@dataclass(eq=False)
+class Track:
+    """One tracked person (or candidate).
+
+    Attributes:
+        id: integer id, unique within its tracker; it returns only to the person it was
+            given to (re-identification), never to anyone else.
+        label: ``id_prefix`` + id, for people reading logs and displays.
+        state: "candidate" until confirmed, then "confirmed".
+        first_seen_ns: capture time of the view that started it.
+        last_seen_ns: latest capture time of a view matched to it.
+        confirmed_ns: capture time of the match that confirmed it, or None.
+        views: latest matched view per camera id, with its stamp.
+        hits: number of views matched to it, the first included.
+    """
+
+    id: int
+    label: str
+    state: Literal["candidate", "confirmed"]
+    first_seen_ns: int
+    last_seen_ns: int
+    history_q: int
+    confirmed_ns: int | None = None
+    views: dict[str, StampedView] = field(default_factory=dict)
+    hits: int = 0
+    _hist: NDArray[np.float32] = field(init=False, repr=False)  # (Q, B) ring buffer of histograms
+    _amp: NDArray[np.float64] = field(init=False, repr=False)  # (Q, B) the same as amplitudes
+    _n_hist: int = field(default=0, init=False, repr=False)
+    _streak_ns: int = field(default=0, init=False, repr=False)  # start of the steady matches
+    _kf_t: int | None = field(default=None, init=False, repr=False)  # time of the position state
+    _kf_x: NDArray[np.float64] = field(init=False, repr=False)  # (2, 2): rows (pos, vel), columns (x, y)
+    _kf_P: NDArray[np.float64] = field(init=False, repr=False)  # (2, 2) shared by both columns
+
+    def __post_init__(self) -> None:
+        self._hist = np.zeros((self.history_q, _BINS), dtype=np.float32)
+        self._amp = np.zeros((self.history_q, _BINS))
+        self._streak_ns = self.first_seen_ns
+        self._kf_x = np.zeros((2, 2))
+        self._kf_P = np.eye(2)
+
+    @property
+    def histograms(self) -> NDArray[np.float32]:
+        """The last (up to Q) non-empty histograms matched, oldest first, shape (n, 16, 8)."""
+        n, q = self._n_hist, self.history_q
+        order = np.arange(n - min(n, q), n) % q
+        return self._hist[order].reshape(-1, *HIST_BINS)
+
+    @property
+    def position(self) -> NDArray[np.float64] | None:
+        """Estimated floor position (2,) in metres at ``position_stamp_ns``, or None if unknown."""
+        return None if self._kf_t is None else self._kf_x[0].copy()
+
+    @property
+    def velocity(self) -> NDArray[np.float64] | None:
+        """Estimated floor velocity (2,) in m/s, or None if the position is unknown."""
+        return None if self._kf_t is None else self._kf_x[1].copy()
+
+    @property
+    def position_std(self) -> float:
+        """1-sigma of the position estimate per axis, metres (NaN if unknown)."""
+        return math.nan if self._kf_t is None else math.sqrt(self._kf_P[0, 0])
+
+    @property
+    def position_stamp_ns(self) -> int | None:
+        return self._kf_t
+
+    def predict_position(self, t_ns: int, accel_std_mps2: float = 2.0) -> tuple[NDArray[np.float64], float] | None:
+        """Predicted floor position (2,) at ``t_ns`` and its 1-sigma per axis, or None if unknown."""
+        if self._kf_t is None:
+            return None
+        x, P = predict_positions(self._kf_x[None], self._kf_P[None], np.array([(t_ns - self._kf_t) / _NS_PER_S]), accel_std_mps2)
+        return x[0, 0], math.sqrt(P[0, 0, 0])
+
+    def _add_histogram(self, h: NDArray, amp: NDArray) -> None:
+        slot = self._n_hist % self.history_q
+        self._hist[slot], self._amp[slot] = h.reshape(-1), amp
+        self._n_hist += 1

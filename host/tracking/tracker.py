@@ -1,0 +1,452 @@
+"""The tracker: people from the observations of all cameras of a site.
+
+The paper's tracker matches each detected person to a known one when the median Bhattacharyya
+distance between its hue-saturation histogram and that person's last Q histograms is below
+d_max; unmatched detections start candidates, a candidate matched for 2 s becomes a person,
+and a person unseen for 2 s is removed. This one adds:
+
+- a geometric gate: a view also needs its ground point (host.tracking.ground) within
+  ``gate_m + sigma`` of the person's predicted position, sigma combining the ground point's and
+  the prediction's uncertainty; a small constant-velocity Kalman filter per track (host.filtering.pose_filter's
+  ``predict``/``update``) makes the gate follow a walking person;
+- joint assignment: all people of one camera frame go to tracks at once
+  (``scipy.optimize.linear_sum_assignment``) on colour plus normalised geometric distance,
+  infeasible pairs forbidden, so one greedy choice cannot steal another view's only match;
+- care in starting people: a view starts a candidate only if it shows enough joints
+  (``min_joints_new``), is placed on the floor (a ground point surer than ``gate_m``, 1 sigma)
+  and does not stand inside the gate of a track that this frame did not see. Views that fail
+  are usually a known person under another camera's light, or a partial view whose box puts
+  them metres away; starting a candidate from them breeds duplicates that later split a
+  person's views between two ids. (The ground rule applies only with ``use_geometry``.)
+- time from the messages: everything runs on capture stamps and an injected ``now_ns``. A
+  camera's frames are admitted in order (``Tracker.admit``): a frame older than the newest one
+  admitted from that camera is "late", one with the same stamp or sequence number a
+  "duplicate", one whose sequence number goes back without the camera having restarted
+  "seq_backwards" (a node restart is recognised: see ``restart_gap_s``), one older than
+  ``remove_after_s`` "stale". The ordering reference of a
+  camera is its newest admitted stamp capped at the host's clock when it was admitted, so a
+  frame stamped in the future (a skewed clock, a hostile peer) cannot make that camera's real
+  frames "late";
+- a cap on tracks (``max_tracks``, at most what a PoseArray may carry): confirmed people are
+  never evicted for newcomers; when the tracker is full, a view that would start a candidate
+  replaces the stalest candidate not seen in this frame, or, if there is none, is ignored
+  (counted as ``track_cap``). A flood of fake people therefore costs candidates, never the
+  output nor the people already tracked.
+
+- re-identification: a removed person is remembered for ``reid_window_s`` (colour history,
+  last position). When a candidate is confirmed and its colours match exactly one remembered
+  person (median Bhattacharyya distance between the two histories below ``reid_d_max``, the
+  next remembered person and every person present at least ``_REID_MARGIN`` further) who could
+  have walked to where it stands, it takes that person's id back. (Measured in the demo's
+  apartment: the same person after a gap 0.07-0.53, different people 0.71-0.91.) Without it, a person who stands where no working camera sees
+  them (a camera died, a corner) for more than ``remove_after_s`` comes back as someone new:
+  a new id and an identity switch for every subscriber.
+
+For each confirmed person, ``view_sets`` gives the paper's set S: its latest view per camera,
+if fresh, for the GNN.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Final, NamedTuple, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from superbody.edge.messages.observation import Observation, PersonView
+from superbody.edge.site import Site
+from superbody.host.tracking.association import Match, _amplitudes, _median_over_history, assign
+from superbody.host.tracking.config import TrackerConfig
+from superbody.host.tracking.ground import ground_points
+from superbody.host.tracking.motion import _NS_PER_S, fuse_positions, predict_positions
+from superbody.host.tracking.track import _BINS, StampedView, Track
+
+__all__ = ["Tracker", "DROP_REASONS"]
+
+# A cue we cannot compute (empty histogram, no ground point) costs this much, normalised.
+_UNKNOWN_COST = 0.5
+# Candidates cost a little more than confirmed people, so a duplicate candidate of a person
+# does not steal that person's views when both fit.
+_CANDIDATE_COST = 0.1
+# Re-identification needs the best remembered person this much closer in colour than the next.
+_REID_MARGIN = 0.1
+
+
+class _Order(NamedTuple):
+    """A camera's frame order: the reference a next frame must not be older than, and its newest frame."""
+
+    ref_ns: int  # newest admitted stamp, capped at the host's clock when it was admitted
+    stamp_ns: int  # stamp of the newest admitted frame
+    seq: int  # its sequence number
+    back_seq: int | None = None  # the last frame refused as seq_backwards since: its seq ...
+    back_ns: int = 0  # ... and stamp
+
+
+class _Lost(NamedTuple):
+    """A removed person, remembered for re-identification."""
+
+    id: int
+    label: str
+    amp: NDArray[np.float64]  # (n, B) their last histograms as amplitudes
+    position: NDArray[np.float64] | None  # (2,) last estimated floor position
+    last_seen_ns: int
+
+
+# Why ``Tracker.admit`` refuses a frame, in the order checked.
+DROP_REASONS: Final[tuple[str, ...]] = ("wrong_site", "unknown_camera", "stale", "late", "duplicate", "seq_backwards")
+
+_STATS = (
+    "observations", "views", "late_dropped", "duplicate_dropped", "stale_dropped", "seq_backwards_dropped", "wrong_site",
+    "unknown_camera", "too_few_joints", "track_cap", "evicted_candidates", "too_few_joints_new", "no_ground_point", "no_signature",
+    "unplaced_new", "suppressed", "matched", "new_candidates", "confirmed", "removed", "dropped_candidates", "reidentified",
+)
+
+
+class Tracker:
+    """People from the observations of one site's cameras.
+
+    Args:
+        site: the site; observations from other sites or unknown cameras are dropped.
+        config: parameters (the paper's by default).
+        id_prefix: prepended to ids in ``Track.label``.
+
+    Attributes:
+        stats: counters, e.g. ``late_dropped``, ``too_few_joints``, ``new_candidates``,
+            ``confirmed``, ``removed``.
+    """
+
+    def __init__(self, site: Site, config: TrackerConfig | None = None, id_prefix: str = "") -> None:
+        self.site = site
+        self.config = config or TrackerConfig()
+        self.id_prefix = id_prefix
+        self.stats: dict[str, int] = dict.fromkeys(_STATS, 0)
+        self._cameras = {c.id: c for c in site.cameras}
+        self._tracks: dict[int, Track] = {}
+        self._lost: dict[int, _Lost] = {}  # removed people, oldest first, for re-identification
+        self._next_id = 1
+        self._order: dict[str, _Order] = {}  # per camera: what its next frame is judged against
+        c = self.config
+        self._confirm_ns = round(c.confirm_after_s * _NS_PER_S)
+        self._remove_ns = round(c.remove_after_s * _NS_PER_S)
+        self._gap_ns = round(c.confirm_max_gap_s * _NS_PER_S)
+        self._restart_ns = round(c.restart_gap_s * _NS_PER_S)
+        self._reid_ns = round(c.reid_window_s * _NS_PER_S)
+
+    @property
+    def tracks(self) -> list[Track]:
+        """All tracks, candidates included, oldest first."""
+        return list(self._tracks.values())
+
+    def track(self, track_id: int) -> Track | None:
+        return self._tracks.get(track_id)
+
+    def admit(self, obs: Observation, now_ns: int | None = None) -> str | None:
+        """Why ``update`` would drop this frame (one of ``DROP_REASONS``), or None if it would use it.
+
+        Changes nothing; ``now_ns`` as in ``update``.
+        """
+        t = int(obs.stamp_ns)
+        now = t if now_ns is None else int(now_ns)
+        if obs.site != self.site.name:
+            return "wrong_site"
+        if obs.camera not in self._cameras:
+            return "unknown_camera"
+        if now - t >= self._remove_ns:
+            return "stale"
+        o = self._order.get(obs.camera)
+        if o is None:
+            return None
+        if t == o.stamp_ns or obs.seq == o.seq:
+            return "duplicate"
+        if t < o.ref_ns:
+            return "late"
+        restarted = t - o.stamp_ns >= self._restart_ns or (o.back_seq is not None and obs.seq == o.back_seq + 1 and t > o.back_ns)
+        if obs.seq < o.seq and not restarted:
+            return "seq_backwards"
+        return None
+
+    def reset_camera(self, camera: str) -> None:
+        """Forget a camera's frame order, e.g. when its node restarted (its liveliness token came back)."""
+        self._order.pop(camera, None)
+
+    def update(self, obs: Observation, now_ns: int | None = None) -> list[Match]:
+        """Match one camera frame's people to tracks.
+
+        Args:
+            obs: one frame of one camera.
+            now_ns: the host's clock (UNIX ns); the frame's stamp by default. A frame already
+                older than ``remove_after_s`` could keep nobody alive and is dropped.
+
+        Returns:
+            One ``Match`` per view of ``obs.people``, in order; empty when the frame was dropped
+            (``admit`` says why; ``stats`` counts each reason).
+        """
+        st, cfg = self.stats, self.config
+        t = int(obs.stamp_ns)
+        now = t if now_ns is None else int(now_ns)
+        st["observations"] += 1
+        reason = self.admit(obs, now)
+        if reason is not None:
+            st[reason if reason in ("wrong_site", "unknown_camera") else f"{reason}_dropped"] += 1
+            if reason == "seq_backwards":  # remembered: if the next frame follows it, the node restarted
+                self._order[obs.camera] = self._order[obs.camera]._replace(back_seq=int(obs.seq), back_ns=t)
+            return []
+        cam = self._cameras[obs.camera]
+        # The stamp orders this camera's next frames, capped at the host's clock: a frame from
+        # the future is used, but cannot make the camera's real frames look late.
+        prev, ref = self._order.get(obs.camera), min(t, now)
+        self._order[obs.camera] = _Order(ref if prev is None else max(prev.ref_ns, ref), t, int(obs.seq))
+        n = len(obs.people)
+        st["views"] += n
+        if n == 0:
+            return []
+
+        kps = np.array([p.keypoints for p in obs.people])  # (N, 17, 3)
+        n_joints = (~np.isnan(kps[:, :, 0])).sum(axis=1)  # (N,)
+        enough = n_joints >= cfg.min_joints
+        st["too_few_joints"] += int(n - enough.sum())
+        idx = np.flatnonzero(enough)  # (K,) the views we use
+        if len(idx) == 0:
+            return [Match(i, None, "ignored") for i in range(n)]
+        matches: list[Match | None] = [None] * n  # the views left None at the end were ignored
+        bboxes = np.array([obs.people[i].bbox for i in idx])  # (K, 4)
+        ground, sigma, _ = ground_points(kps[idx], bboxes, cam)  # (K, 2), (K,)
+        has_ground = ~np.isnan(sigma)  # (K,)
+        st["no_ground_point"] += int((~has_ground).sum())
+        hists = np.array([obs.people[i].histogram.reshape(-1) for i in idx])  # (K, B)
+        has_colour = hists.sum(axis=1) > 0  # (K,)
+        amps = _amplitudes(hists)  # (K, B)
+
+        tracks = [tr for tr in self._tracks.values() if t - tr.last_seen_ns < self._remove_ns]
+        rows, cols, colour_d, geo_d, near = self._associate(t, tracks, amps, has_colour, ground, sigma, has_ground)
+
+        fused: list[tuple[Track, int]] = []  # (track, row) pairs whose ground point updates the track
+        for r, c in zip(rows, cols):
+            tr, i = tracks[c], int(idx[r])
+            self._apply(tr, obs.camera, t, obs.people[i], hists[r], amps[r], has_colour[r])
+            fused.append((tr, r))
+            matches[i] = Match(i, tr.id, "matched", float(colour_d[r, c]), float(geo_d[r, c]))
+            st["matched"] += 1
+        taken = np.zeros(len(idx), dtype=bool)
+        taken[rows] = True
+        # A track this frame did not see, standing where an unmatched view stands: the view is
+        # that person in another camera's light (or a partial view's odd colours), not a
+        # newcomer. Starting a candidate there would breed a duplicate of them. (A newcomer
+        # beside someone is still started by any camera that sees both in one frame.)
+        lonely = np.ones(len(tracks), dtype=bool)
+        lonely[cols] = False
+        for r in np.flatnonzero(~taken):
+            i = int(idx[r])
+            if not (has_colour[r] or (has_ground[r] and cfg.use_geometry)):
+                st["no_signature"] += 1  # nothing to ever match it on again
+                continue
+            if n_joints[i] < cfg.min_joints_new:
+                st["too_few_joints_new"] += 1
+                continue
+            if cfg.use_geometry and not sigma[r] < cfg.gate_m:  # no ground point, or one less sure than the gate
+                st["unplaced_new"] += 1
+                continue
+            if (near[r] & lonely).any():
+                st["suppressed"] += 1
+                continue
+            if len(self._tracks) >= cfg.max_tracks and not self._evict_candidate(t):
+                st["track_cap"] += 1
+                continue
+            tr = Track(self._next_id, f"{self.id_prefix}{self._next_id}", "candidate", t, t, cfg.history_q)
+            self._next_id += 1
+            self._tracks[tr.id] = tr
+            st["new_candidates"] += 1
+            self._apply(tr, obs.camera, t, obs.people[i], hists[r], amps[r], has_colour[r])
+            fused.append((tr, r))
+            matches[i] = Match(i, tr.id, "created")
+        fused = [(tr, r) for tr, r in fused if has_ground[r]]
+        if fused:
+            rs = np.array([r for _, r in fused])
+            fuse_positions([tr for tr, _ in fused], ground[rs], sigma[rs], t, cfg.accel_std_mps2)
+        return [Match(i, None, "ignored") if m is None else m for i, m in enumerate(matches)]
+
+    def _associate(
+        self, t: int, tracks: list[Track], amps: NDArray, has_colour: NDArray,
+        ground: NDArray, sigma: NDArray, has_ground: NDArray,
+    ) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
+        """Cost, feasibility and joint assignment of K views to M tracks at time ``t``.
+
+        Args:
+            amps: (K, B) the views' histogram amplitudes; has_colour (K,) False for empty ones.
+            ground, sigma, has_ground: (K, 2), (K,), (K,) the views' ground points.
+
+        Returns:
+            ``(rows, cols, colour_d, geo_d, near)``: matched view and track indices, the (K, M)
+            colour and ground distances (NaN where unknown), and (K, M) whether each view's
+            ground point lies inside each track's gate (all False without geometry).
+        """
+        cfg = self.config
+        k, m = len(amps), len(tracks)
+        geo_d = np.full((k, m), np.nan)
+        near = np.zeros((k, m), dtype=bool)
+        if m == 0:
+            return np.empty(0, np.intp), np.empty(0, np.intp), np.full((k, 0), np.nan), geo_d, near
+        q = cfg.history_q
+        history = np.array([tr._amp for tr in tracks]).reshape(m * q, _BINS)  # (M*Q, B)
+        counts = np.array([min(tr._n_hist, q) for tr in tracks])  # (M,)
+        # d = sqrt(1 - BC), BC the dot product of amplitudes (see _amplitudes)
+        d = np.sqrt(np.clip(1.0 - amps @ history.T, 0.0, 1.0)).reshape(k, m, q)  # (K, M, Q)
+        colour_d = _median_over_history(d, counts)  # (K, M)
+        colour_d[~has_colour] = np.nan
+        colour_known = ~np.isnan(colour_d)
+        with np.errstate(invalid="ignore"):
+            feasible = ~colour_known | (colour_d < cfg.d_max)  # (K, M)
+        cost = np.where(colour_known, colour_d / cfg.d_max, _UNKNOWN_COST)
+        cost += np.array([_CANDIDATE_COST if tr.state == "candidate" else 0.0 for tr in tracks])[None, :]
+        vouched = colour_known
+        if cfg.use_geometry:
+            has_pos = np.array([tr._kf_t is not None for tr in tracks], dtype=bool)  # (M,)
+            pos, pos_std = np.full((m, 2), np.nan), np.full(m, np.nan)
+            if has_pos.any():
+                known = [tracks[j] for j in np.flatnonzero(has_pos)]
+                x, P = predict_positions(
+                    np.array([tr._kf_x for tr in known]), np.array([tr._kf_P for tr in known]),
+                    np.array([(t - tr._kf_t) / _NS_PER_S for tr in known]), cfg.accel_std_mps2,
+                )
+                pos[has_pos], pos_std[has_pos] = x[:, 0, :], np.sqrt(P[:, 0, 0])
+            geo_d = np.linalg.norm(ground[:, None, :] - pos[None, :, :], axis=2)  # (K, M)
+            radius = cfg.gate_m + np.hypot(sigma[:, None], pos_std[None, :])  # (K, M)
+            geo_known = has_ground[:, None] & has_pos[None, :]
+            with np.errstate(invalid="ignore"):
+                near = geo_known & (geo_d <= radius)
+                feasible &= ~geo_known | near
+                cost += cfg.geometry_weight * np.where(geo_known, geo_d / radius, _UNKNOWN_COST)
+            vouched = vouched | geo_known
+        rows, cols = assign(cost, feasible & vouched)  # at least one cue must vouch for a pair
+        return rows, cols, colour_d, geo_d, near
+
+    def _evict_candidate(self, t: int) -> bool:
+        """Make room for a new candidate: drop the stalest candidate not seen at ``t``, if any."""
+        stale = [tr for tr in self._tracks.values() if tr.state == "candidate" and tr.last_seen_ns < t]
+        if not stale:
+            return False
+        victim = min(stale, key=lambda tr: (tr.last_seen_ns, tr.hits))
+        del self._tracks[victim.id]
+        self.stats["evicted_candidates"] += 1
+        return True
+
+    def _apply(self, tr: Track, camera: str, t: int, view: PersonView, hist: NDArray, amp: NDArray, has_colour: bool) -> None:
+        """Record a view matched to (or starting) ``tr``; confirm it when its time has come."""
+        if t - tr.last_seen_ns > self._gap_ns:
+            tr._streak_ns = t
+        tr.last_seen_ns = max(tr.last_seen_ns, t)
+        tr.hits += 1
+        tr.views[camera] = StampedView(t, view)
+        if has_colour:
+            tr._add_histogram(hist, amp)
+        if tr.state == "candidate" and tr.last_seen_ns - tr._streak_ns >= self._confirm_ns:
+            tr.state, tr.confirmed_ns = "confirmed", t
+            self.stats["confirmed"] += 1
+            self._reidentify(tr, t)
+
+    def _reidentify(self, tr: Track, t: int) -> None:
+        """Give a just-confirmed track the id of the one remembered person it clearly is, if any."""
+        cfg = self.config
+        self._forget_lost(t)
+        n = min(tr._n_hist, cfg.history_q)
+        if not self._lost or n == 0:
+            return
+        mine = tr._amp[:n]  # (n, B): the ring buffer's used rows
+        pos = tr.position
+        scored: list[tuple[float, int]] = []
+        for lost in self._lost.values():
+            if pos is not None and lost.position is not None:
+                reach = cfg.gate_m + cfg.reid_speed_mps * (t - lost.last_seen_ns) / _NS_PER_S
+                if np.linalg.norm(pos - lost.position) > reach:
+                    continue
+            # d = sqrt(1 - BC) for every pair of histories; the median is robust to odd views
+            d = np.sqrt(np.clip(1.0 - mine @ lost.amp.T, 0.0, 1.0))  # (n, n_lost)
+            scored.append((float(np.median(d)), lost.id))
+        scored.sort()
+        if not scored or scored[0][0] >= cfg.reid_d_max or (len(scored) > 1 and scored[1][0] - scored[0][0] < _REID_MARGIN):
+            return
+        # Lighting differs between cameras, so the scale of "same colours" does too: the people
+        # present now are certainly not the lost one, and must all look clearly less like it.
+        for other in self._tracks.values():
+            m = min(other._n_hist, cfg.history_q)
+            if other is tr or other.state != "confirmed" or m == 0:
+                continue
+            d = np.sqrt(np.clip(1.0 - mine @ other._amp[:m].T, 0.0, 1.0))
+            if float(np.median(d)) - scored[0][0] < _REID_MARGIN:
+                return
+        lost = self._lost.pop(scored[0][1])
+        del self._tracks[tr.id]
+        tr.id, tr.label = lost.id, lost.label
+        self._tracks[tr.id] = tr
+        self.stats["reidentified"] += 1
+
+    def _forget_lost(self, now_ns: int) -> None:
+        for pid in [pid for pid, lost in self._lost.items() if now_ns - lost.last_seen_ns > self._reid_ns]:
+            del self._lost[pid]
+
+    def set_position(self, track_id: int, xy: NDArray | tuple[float, float], stamp_ns: int, std_m: float = 0.1) -> bool:
+        """Feed back a better position (e.g. the GNN's) for a track, as a measurement of 1-sigma ``std_m``.
+
+        Returns:
+            False if no such track (it may just have been removed).
+        """
+        tr = self._tracks.get(track_id)
+        xy = np.asarray(xy, dtype=np.float64).reshape(2)
+        if tr is None or not np.isfinite(xy).all() or not (std_m > 0 and math.isfinite(std_m)):
+            return False
+        fuse_positions([tr], xy[None], np.array([float(std_m)]), int(stamp_ns), self.config.accel_std_mps2)
+        return True
+
+    def set_positions(self, track_ids: Sequence[int], xy: NDArray, stamps_ns: Sequence[int], std_m: float = 0.1) -> NDArray[np.bool_]:
+        """``set_position`` for many tracks at once (one Kalman batch): ids (B,), xy (B, 2), stamps (B,).
+
+        Returns:
+            (B,) bool, False where there is no such track or the point is not finite.
+        """
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        if not (std_m > 0 and math.isfinite(std_m)):
+            return np.zeros(len(xy), dtype=bool)
+        tracks = [self._tracks.get(int(i)) for i in track_ids]
+        ok = np.array([tr is not None for tr in tracks], dtype=bool) & np.isfinite(xy).all(axis=1)
+        if ok.any():
+            idx = np.flatnonzero(ok)
+            fuse_positions([tracks[i] for i in idx], xy[idx], np.full(len(idx), float(std_m)),  # type: ignore[misc]
+                            np.asarray(stamps_ns, dtype=np.int64)[idx], self.config.accel_std_mps2)
+        return ok
+
+    def prune(self, now_ns: int) -> list[Track]:
+        """Remove tracks unseen for ``remove_after_s`` and return them."""
+        gone = [tr for tr in self._tracks.values() if now_ns - tr.last_seen_ns >= self._remove_ns]
+        for tr in gone:
+            del self._tracks[tr.id]
+            self.stats["removed" if tr.state == "confirmed" else "dropped_candidates"] += 1
+            n = min(tr._n_hist, self.config.history_q)
+            if tr.state == "confirmed" and n > 0 and self._reid_ns > 0:
+                self._lost[tr.id] = _Lost(tr.id, tr.label, tr._amp[:n].copy(), tr.position, tr.last_seen_ns)
+        while len(self._lost) > self.config.max_tracks:  # bounded whatever the input
+            del self._lost[next(iter(self._lost))]
+        self._forget_lost(now_ns)
+        return gone
+
+    def people(self, now_ns: int) -> list[Track]:
+        """Confirmed tracks still alive at ``now_ns``, oldest first."""
+        return [
+            tr for tr in self._tracks.values()
+            if tr.state == "confirmed" and now_ns - tr.last_seen_ns < self._remove_ns
+        ]
+
+    def view_sets(self, now_ns: int, freshness_s: float = 0.5) -> dict[int, dict[str, PersonView]]:
+        """Set S of each confirmed person: its latest view per camera captured within ``freshness_s`` of now.
+
+        People with no fresh view are left out.
+        """
+        if not (freshness_s > 0 and math.isfinite(freshness_s)):
+            raise ValueError(f"view_sets: freshness_s must be a positive number of seconds, got {freshness_s!r}")
+        fresh_ns = round(freshness_s * _NS_PER_S)
+        out: dict[int, dict[str, PersonView]] = {}
+        for tr in self.people(now_ns):
+            s = {cam: sv.view for cam, sv in tr.views.items() if now_ns - sv.stamp_ns <= fresh_ns}
+            if s:
+                out[tr.id] = s
+        return out

@@ -1,0 +1,151 @@
+"""Ground points from one view: synthetic cameras, projected synthetic skeletons."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from superbody.edge.body import INDEX, NUM_KEYPOINTS, TYPICAL_HEIGHT_M
+from superbody.edge.camera import Camera, look_at_rotation, project
+from superbody.edge.messages.observation import PersonView, empty_histogram
+from superbody.host.tracking.ground import LEVELS, ground_point, ground_points
+
+ANKLES = (INDEX["left_ankle"], INDEX["right_ankle"])
+HIPS = (INDEX["left_hip"], INDEX["right_hip"])
+SHOULDERS = (INDEX["left_shoulder"], INDEX["right_shoulder"])
+LOWER = ANKLES + HIPS + (INDEX["left_knee"], INDEX["right_knee"])
+BELOW_HEAD = tuple(range(5, NUM_KEYPOINTS))
+LEVEL = {lv.name: k for k, lv in enumerate(LEVELS)}
+
+
+def camera(position=(0.0, 0.0, 2.5), target=(3.0, 0.0, 1.0), dist=(), width=640, height=480) -> Camera:
+    R = look_at_rotation(np.array(position), np.array(target))
+    return Camera(
+        id="c", width=width, height=height, fps=15.0, fx=500.0, fy=500.0, cx=width / 2, cy=height / 2,
+        dist=dist, position=position, rotation=tuple(tuple(float(v) for v in row) for row in R),
+    )
+
+
+def skeleton(x: float, y: float, yaw: float = 0.0) -> np.ndarray:
+    """(17, 3) world joints of a person standing at (x, y), facing ``yaw``."""
+    # Left joints sit to the person's left, right ones to the right; the head a little forward.
+    lateral = np.array([0.0, 0.03, -0.03, 0.07, -0.07, 0.2, -0.2, 0.25, -0.25, 0.25, -0.25, 0.12, -0.12, 0.1, -0.1, 0.1, -0.1])
+    forward = np.zeros(NUM_KEYPOINTS)
+    forward[:3] = 0.1
+    f = np.array([math.cos(yaw), math.sin(yaw)])
+    left = np.array([-f[1], f[0]])
+    xy = np.array([x, y]) + lateral[:, None] * left + forward[:, None] * f
+    return np.column_stack([xy, TYPICAL_HEIGHT_M])
+
+
+def view(cam: Camera, x: float, y: float, hide: tuple[int, ...] = ()) -> PersonView:
+    """The person at (x, y) seen by ``cam``; joints in ``hide`` or outside the image are missing.
+    The box spans the joints and reaches the floor."""
+    uv, depth = project(skeleton(x, y), cam)
+    kp = np.column_stack([uv, np.full(NUM_KEYPOINTS, 0.9)]).astype(np.float32)
+    inside = (depth > 0) & (uv >= 0).all(axis=1) & (uv[:, 0] < cam.width) & (uv[:, 1] < cam.height)
+    kp[~inside] = np.nan
+    kp[list(hide)] = np.nan
+    feet, _ = project(np.array([[x, y, 0.0]]), cam)
+    pts = np.vstack([uv, feet])
+    bbox = np.array([*pts.min(axis=0), *pts.max(axis=0)], dtype=np.float32)
+    return PersonView(kp, bbox, empty_histogram())
+
+
+@pytest.mark.parametrize(
+    ("xy", "hide", "level", "tol"),
+    [
+        ((3.0, 0.0), (), "ankles", 0.02),              # everything visible: the ankles decide
+        ((5.0, 1.0), (), "ankles", 0.02),              # farther and off-axis
+        ((3.0, 0.0), (ANKLES[0],), "ankles", 0.15),    # one ankle: off by its lateral offset at most
+        ((3.0, 0.0), ANKLES, "hips", 0.02),            # no ankles: hips at 0.93 m
+        ((3.0, 0.5), LOWER, "shoulders", 0.02),        # legs hidden (behind a table): shoulders
+        ((3.0, 0.0), BELOW_HEAD, "bbox", 0.05),        # only the head: the box's bottom edge
+    ],
+)
+def test_ground_point_levels(xy, hide, level, tol):
+    cam = camera()
+    got = ground_point(view(cam, *xy, hide=hide), cam)
+    assert got is not None
+    point, sigma = got
+    assert np.linalg.norm(point - xy) < tol
+    assert np.linalg.norm(point - xy) < sigma
+    _, _, levels = ground_points(view(cam, *xy, hide=hide).keypoints[None], view(cam, *xy).bbox[None], cam)
+    assert levels[0] == LEVEL[level]
+
+
+def test_ground_point_undoes_lens_distortion():
+    cam = camera(dist=(-0.25, 0.08, 0.001, -0.001, -0.01))
+    point, _ = ground_point(view(cam, 4.0, -1.0), cam)
+    assert np.linalg.norm(point - (4.0, -1.0)) < 0.02
+
+
+def _head_only(cam: Camera, x: float, y: float) -> PersonView:
+    """Only the head seen, and a box around the head alone (as detectors that box keypoints do)."""
+    v = view(cam, x, y, hide=BELOW_HEAD)
+    head = v.keypoints[:5, :2]
+    return PersonView(v.keypoints, np.array([*head.min(axis=0), *head.max(axis=0)], np.float32), v.histogram)
+
+
+def _hand_view(uv: tuple[float, float], bbox=(0.0, 0.0, 1.0, 1.0)) -> PersonView:
+    kp = np.full((NUM_KEYPOINTS, 3), np.nan, dtype=np.float32)
+    kp[list(ANKLES + HIPS + SHOULDERS)] = (*uv, 0.9)
+    return PersonView(kp, np.array(bbox, dtype=np.float32), empty_histogram())
+
+
+@pytest.mark.parametrize(
+    ("cam", "v"),
+    [
+        # Camera looking up past the horizon: the top row's ray never comes down to the floor.
+        (camera(target=(5.0, 0.0, 2.0)), _hand_view((320.0, 0.0))),
+        # Camera pitched down ~27 deg, top row ~1 deg below the horizon: floor > 30 m away.
+        (camera(), _hand_view((320.0, 0.0))),
+        # No joints and a box whose bottom is the image's bottom edge: its feet are cut off.
+        (camera(), PersonView(np.full((17, 3), np.nan, np.float32), np.array([300, 200, 340, 480], np.float32), empty_histogram())),
+        # A box around a head alone: its bottom is a chin, not feet (the floor point would be metres off).
+        (camera(), _head_only(camera(), 3.0, 0.0)),
+        # Nothing at all: no joints, a degenerate box.
+        (camera(), PersonView(np.full((17, 3), np.nan, np.float32), np.zeros(4, np.float32), empty_histogram())),
+    ],
+)
+def test_ground_point_rejects(cam, v):
+    assert ground_point(v, cam) is None
+
+
+def test_ground_point_falls_through_a_level_that_misses():
+    # Ankles at a pixel above the horizon (a bad detection) but hips and shoulders fine.
+    cam = camera()
+    good = view(cam, 3.0, 0.0)
+    kp = good.keypoints.copy()
+    kp[list(ANKLES)] = (320.0, 0.0, 0.9)
+    point, _ = ground_point(PersonView(kp, good.bbox, good.histogram), cam)
+    assert np.linalg.norm(point - (3.0, 0.0)) < 0.02
+
+
+def test_ground_points_empty():
+    xy, sigma, level = ground_points(np.zeros((0, 17, 3), np.float32), np.zeros((0, 4), np.float32), camera())
+    assert xy.shape == (0, 2) and sigma.shape == (0,) and level.shape == (0,)
+
+
+@pytest.mark.parametrize(
+    "hide",
+    [
+        (),           # ankles
+        ANKLES,       # hips
+        LOWER,        # shoulders
+        BELOW_HEAD,   # bbox
+    ],
+)
+def test_uncertainty_grows_with_distance(hide):
+    cam = camera(target=(4.0, 0.0, 0.5))
+    sigmas = [ground_point(view(cam, x, 0.0, hide=hide), cam)[1] for x in (2.5, 4.0, 7.0)]
+    assert sigmas[0] < sigmas[1] < sigmas[2]
+
+
+@pytest.mark.parametrize("x", [2.5, 4.0, 7.0, 12.0])  # near (feet at the image's bottom), middle, far, very far
+def test_uncertainty_grows_with_each_fallback(x):
+    cam = camera(target=(4.0, 0.0, 0.5))
+    sigmas = [ground_point(view(cam, x, 0.0, hide=h), cam)[1] for h in ((), ANKLES, LOWER, BELOW_HEAD)]
+    assert sigmas == sorted(sigmas) and len(set(sigmas)) == 4
