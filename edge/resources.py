@@ -22,7 +22,7 @@ MODELS_PACKAGE = "superbody.models"
 DEFAULT_SITE = "wtf-apartment"  # the paper's apartment: the demo's and the tools' default
 SCHEMAS_PACKAGE = "superbody.schemas"
 # Message name -> its JSON Schema in docs/schemas/, generated from the message's type by
-# superbody.host.messages.schemas: edge.wire.ObservationMsg, host.messages.pose.PoseArrayMsg, host.messages.status.HostStatus.
+# superbody.host.messages.schemas: edge.messages.wire.ObservationMsg, host.messages.pose.PoseArrayMsg, host.messages.status.HostStatus.
 MESSAGES = {
     "observation": (SCHEMAS_PACKAGE, "observation.schema.json"),
     "people": (SCHEMAS_PACKAGE, "people.schema.json"),

@@ -29,7 +29,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _add_train(sub: argparse._SubParsersAction) -> None:
-    from superbody.models import coverage, crossval, ensemble, train  # light: torch is imported only when a run starts
+    from superbody.models.evaluation import coverage, crossval
+    from superbody.models.training import ensemble, train  # light: torch is imported only when a run starts
 
     train.register(sub)
     ensemble.register(sub)
@@ -77,7 +78,7 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
     )
     h.add_argument("--cv", type=Path, action="append", required=True, metavar="CV.npz",
                    help="held-out predictions from superbody crossval --predictions-out; repeat it for an ensemble's members "
-                        "(same file, folds and split; combined as the ensemble model does, models/ensemble.py)")
+                        "(same file, folds and split; combined as the ensemble model does, models/training/ensemble.py)")
     h.add_argument("--dataset", type=Path, required=True, metavar="PATH.json", help="the WheresTheFellow file the cross-validation used")
     h.add_argument("--site", type=Path, default=site_path("wtf-apartment"), metavar="SITE.toml", help="site file (default: the shipped wtf-apartment)")
     h.add_argument("--model", type=Path, action="append", default=[], metavar="M.onnx", help="model to write the calibration into (repeatable)")
@@ -132,7 +133,7 @@ def _print_calibration(site, fits: dict, errors: dict[str, tuple[float, float, i
 
 def _run_calibrate_from_dataset(args: argparse.Namespace) -> int:
     from superbody.edge.site import SiteError, dump_site, load_site, parse_site
-    from superbody.models.wtf import DatasetError, load_wtf_raw
+    from superbody.models.data.wtf import DatasetError, load_wtf_raw
 
     command = "calibrate from-dataset"
     if not args.fps > 0:
@@ -142,7 +143,7 @@ def _run_calibrate_from_dataset(args: argparse.Namespace) -> int:
         # Imported after the file is read: a bad path fails fast, without loading scipy.
         import numpy as np
 
-        from superbody.models.calibrate import calibrate_dataset, dataset_pairs, reprojection_errors
+        from superbody.models.dataset_calibration import calibrate_dataset, dataset_pairs, reprojection_errors
 
         site, fits = calibrate_dataset(raw, name=args.name, fps=args.fps)
         # The errors of the cameras exactly as written (dump_site rounds to 1e-9), for the header.
@@ -171,10 +172,10 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
     from google.protobuf.message import DecodeError
 
     from superbody.edge.site import SiteError, load_site
-    from superbody.models import hybrid
-    from superbody.models.evaluate import format_table, relative_change, score
-    from superbody.models.export import read_metadata
-    from superbody.models.wtf import DatasetError, load_wtf, truth_to_torso
+    from superbody.models import hybrid_fit
+    from superbody.models.data.wtf import DatasetError, load_wtf, truth_to_torso
+    from superbody.models.evaluation.evaluate import format_table, relative_change, score
+    from superbody.models.training.export import read_metadata
 
     command = "calibrate hybrid"
     try:
@@ -198,7 +199,7 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
             return _fail(command, f"--cv {path}: other folds, samples or truth offset than --cv {args.cv[0]} (an ensemble's members "
                                   "must be cross-validated on the same split)")
     fold, offset = members[0]["fold"], float(members[0]["truth_offset_m"])
-    from superbody.models.ensemble import combine
+    from superbody.models.training.ensemble import combine
 
     def combined(key: str):  # the members' held-out predictions combined as the ensemble combines them
         return combine(np.stack([m[f"predictions{key}"] for m in members]), np.stack([m[f"std{key}"] for m in members]))
@@ -211,18 +212,18 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
     for m in args.model:
         if not m.is_file():
             return _fail(command, f"--model {m}: no such file")
-        try:  # an int8 export carries quant.format (models.export.quantize_int8)
+        try:  # an int8 export carries quant.format (models.training.export.quantize_int8)
             quantised[m] = "quant.format" in read_metadata(m)
         except DecodeError as e:
             return _fail(command, f"--model {m}: not an ONNX model ({e})")
     truth = truth_to_torso(np.array([s.truth for s in samples]), offset)
     cams = np.array([len(s.views) for s in samples])
-    analytic, pair = hybrid.analytic_with_pairs(samples, site)
+    analytic, pair = hybrid_fit.analytic_with_pairs(samples, site)
     try:
-        fits = {k: hybrid.fit_calibration(n, sd, analytic, pair, truth, cams, source=(
+        fits = {k: hybrid_fit.fit_calibration(n, sd, analytic, pair, truth, cams, source=(
                     f"{args.dataset.name}, {len(samples)} samples; {'int8 ' if k == 'int8' else ''}network sigmas from "
                     f"{' + '.join(p.name for p in args.cv)}")) for k, (n, sd) in kinds.items()}
-        lofos = {k: hybrid.leave_one_fold_out(n, sd, analytic, pair, truth, cams, fold, site) for k, (n, sd) in kinds.items()}
+        lofos = {k: hybrid_fit.leave_one_fold_out(n, sd, analytic, pair, truth, cams, fold, site) for k, (n, sd) in kinds.items()}
     except ValueError as e:
         return _fail(command, str(e))
     (net, std), (scale, cal), (lofo, lofo_std, source) = kinds["fp32"], fits["fp32"], lofos["fp32"]
@@ -230,8 +231,8 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
     if has_int8:
         scored.update({"hybrid int8 (CV)": lofos["int8"][0], "network int8 (CV)": kinds["int8"][0]})
     reports = score(samples, {**scored, "analytic": analytic}, offset)
-    coverage = {"network": hybrid.sigma_coverage(net, hybrid.scaled_std(std, scale, cams), truth),
-                "hybrid": hybrid.sigma_coverage(lofo, lofo_std, truth)}
+    coverage = {"network": hybrid_fit.sigma_coverage(net, hybrid_fit.scaled_std(std, scale, cams), truth),
+                "hybrid": hybrid_fit.sigma_coverage(lofo, lofo_std, truth)}
     print("network sigma scale (x, y, yaw) by cameras: " + "; ".join(f"{k}: {', '.join(f'{v:.2f}' for v in row)}" for k, row in zip((1, 2, 3), scale)))
     print("analytic sigma by cameras (x mm, y mm, yaw deg): " + "; ".join(
         f"{k}: {s[0] * 1000:.0f}, {s[1] * 1000:.0f}, {np.degrees(s[2]):.1f}" for k, s in zip((1, 2, 3), cal.analytic_std))
@@ -254,7 +255,7 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
         print("int8 trust in the network (x, y, yaw) by cameras: " + "; ".join(f"{k}: {', '.join(f'{v:g}' for v in row)}" for k, row in zip((1, 2, 3), fits["int8"][1].net_trust)))
     for m in args.model:
         kind = "int8" if quantised[m] and has_int8 else "fp32"
-        hybrid.write_calibration(m, *fits[kind])
+        hybrid_fit.write_calibration(m, *fits[kind])
         print(f"wrote the {'int8 ' if kind == 'int8' else ''}calibration into {m}"
               + (" (int8 model, but no int8 predictions in --cv: the fp32 calibration)" if quantised[m] and kind == "fp32" else ""))
     if args.json_out is not None:
@@ -277,11 +278,11 @@ _BASELINE = "analytic"
 # The truth offset is a physical distance on a person: anything beyond a metre is a typo.
 _MAX_TRUTH_OFFSET_M = 1.0
 _EVAL_ESTIMATORS = ("onnx", "analytic")  # onnx: each --model as the host runs it (hybrid when it carries a calibration)
-_TEMPORAL_AT = ("first", "last")  # models.temporal.SCORE_AT, without importing it for --help
+_TEMPORAL_AT = ("first", "last")  # models.evaluation.temporal.SCORE_AT, without importing it for --help
 
 
 def _add_eval(sub: argparse._SubParsersAction) -> None:
-    from superbody.models.wtf import TRUTH_OFFSET_M  # numpy only
+    from superbody.models.data.wtf import TRUTH_OFFSET_M  # numpy only
 
     p = sub.add_parser(
         "eval",
@@ -337,7 +338,7 @@ def _run_eval(args: argparse.Namespace) -> int:
     import math
 
     from superbody.edge.site import SiteError, load_site
-    from superbody.models.wtf import DatasetError, load_wtf_raw, to_samples
+    from superbody.models.data.wtf import DatasetError, load_wtf_raw, to_samples
 
     command = "eval"
     if not (math.isfinite(args.truth_offset) and abs(args.truth_offset) <= _MAX_TRUTH_OFFSET_M):
@@ -369,7 +370,7 @@ def _run_eval(args: argparse.Namespace) -> int:
 
     from superbody.host.estimation.analytic import AnalyticEstimator
     from superbody.host.estimation.hybrid import HybridEstimator
-    from superbody.models.evaluate import format_table, json_report, predict, score, write_predictions_csv
+    from superbody.models.evaluation.evaluate import format_table, json_report, predict, score, write_predictions_csv
 
     # A hybrid model is also scored as its network alone, to show what the fusion adds.
     host_names = {}
@@ -399,7 +400,8 @@ def _run_eval(args: argparse.Namespace) -> int:
         print(format_table(reports, args.truth_offset))
     scans = None
     if args.latency_scan:
-        from superbody.models.temporal import format_latency_scan, latency_scan, truth_track, view_stamps
+        from superbody.models.evaluation.temporal import view_stamps
+        from superbody.models.evaluation.temporal_scores import format_latency_scan, latency_scan, truth_track
 
         track, stamps = truth_track(raw), view_stamps(raw)
         scans = {name: latency_scan(pred, stamps, track, args.truth_offset) for name, pred in predictions.items()}
@@ -422,7 +424,7 @@ def _run_eval(args: argparse.Namespace) -> int:
             write_predictions_csv(args.predictions_out, samples, pred, args.truth_offset)
             print(f"wrote {args.predictions_out}")
         if args.plots is not None:
-            from superbody.models.plots import write_plots
+            from superbody.models.evaluation.plots import write_plots
 
             for path in write_plots(args.plots, samples, predictions, args.truth_offset):
                 print(f"wrote {path}")
@@ -442,8 +444,9 @@ def _eval_temporal(args, raw, samples, site, estimators: dict, host_names: dict,
     """
     import numpy as np
 
-    from superbody.models.evaluate import format_table, score
-    from superbody.models.temporal import format_replay, replay, replay_summary, view_stamps
+    from superbody.models.evaluation.evaluate import format_table, score
+    from superbody.models.evaluation.temporal import replay, view_stamps
+    from superbody.models.evaluation.temporal_scores import format_replay, replay_summary
 
     stamps = view_stamps(raw)
     truth = np.array([s.truth for s in samples])

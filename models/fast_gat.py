@@ -22,7 +22,7 @@ The module takes the trained ``GAT`` (its parameters are shared, not copied) and
 inputs (x, adj, mask), but does not read ``adj``: an edge is a template edge whose two ends are
 present, ``adj == host.estimation.graph.masked_adjacency(spec, mask)``, which holds for every graph
 ``build_batch`` makes and every graph the models are trained on, not for arbitrary adjacency.
-It exists for export (``models.export``; metadata ``model.reads_adj`` "false").
+It exists for export (``models.training.export``; metadata ``model.reads_adj`` "false").
 
 Shapes: B graphs, S slots of Q = 18 nodes (body first), H heads of Dh features, D = H Dh.
 """

@@ -17,7 +17,7 @@ training site's floor centre for the "site" variant (``hparams["origin"]``, fixe
 model) and the serving site's floor centre for the "rays" variant (whose features are
 floor-centred too, so the model never sees absolute coordinates). ``PoseNet.targets`` builds
 the training targets and ``PoseNet.decode`` inverts them; the ONNX export bakes the scale and,
-for "site" models, the origin into the graph (see ``models.export``).
+for "site" models, the origin into the graph (see ``models.training.export``).
 
 Everything is dense tensors and static shapes (N, F, R come from the GraphSpec), with no
 data-dependent Python control flow, so the models export to ONNX with a dynamic batch axis.

@@ -22,8 +22,8 @@ sys.path.insert(0, str(ROOT))
 
 from superbody.edge import body  # noqa: E402
 from superbody.edge.site import load_site  # noqa: E402
-from superbody.models.simstats import facing_rates, simulate, statistics  # noqa: E402
-from superbody.models.wtf import load_wtf  # noqa: E402
+from superbody.models.data.simstats import facing_rates, simulate, statistics  # noqa: E402
+from superbody.models.data.wtf import load_wtf  # noqa: E402
 
 
 def _row(name: str, a: float, b: float, fmt: str = "{:.3f}") -> str:
@@ -64,7 +64,7 @@ def main(dataset: str, site: str, seconds: float, seed: int, json_out: str | Non
     print("  " + "views".ljust(16) + "".join(f"{x:>5d}/{y:<5d}" for x, y in zip(ca, cb)))
     for j, name in enumerate(body.KEYPOINTS):
         print("  " + name.ljust(16) + "".join(f"{x:>5.2f}/{y:<5.2f}" for x, y in zip(ra[j], rb[j])))
-    print("  facing-visibility table (dev.json rates over their view-weighted mean, edge.simulator.FACING_VISIBILITY):")
+    print("  facing-visibility table (dev.json rates over their view-weighted mean, edge.sim.FACING_VISIBILITY):")
     norm = ra / (ra @ (ca / ca.sum()))[:, None]
     for j, name in enumerate(body.KEYPOINTS):
         print("    (" + ", ".join(f"{x:.2f}" for x in norm[j]) + f"),  # {name}")

@@ -5,7 +5,7 @@
 #      seeds, and the site-independent model (rays + geometry, random rooms only, never this
 #      layout), in parallel;
 #   2. the shipped model is an ensemble of three fine-tunings on sim + all of dev.json
-#      (models/ensemble.py): two from the first simulation model, one from the second, each on
+#      (models/training/ensemble.py): two from the first simulation model, one from the second, each on
 #      its own simulated data. Each member is also cross-validated, blocked 5-fold on dev.json,
 #      by time segments and by floor regions (the proxy for a recording that walks elsewhere);
 #   3. the members combined into one ONNX model (superbody ensemble);

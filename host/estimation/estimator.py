@@ -1,6 +1,6 @@
 """Estimators: the views of each person -> (x, y, yaw) on the floor, one batched call per tick.
 
-``OnnxEstimator`` runs an exported pose network (``models/export.py``) with onnxruntime, on
+``OnnxEstimator`` runs an exported pose network (``models/training/export.py``) with onnxruntime, on
 the superbody graphs of ``host.estimation.graph``. numpy and onnxruntime only: the host never imports
 torch.
 
@@ -59,7 +59,7 @@ __all__ = [
     "MAX_BATCH",
 ]
 
-# The exported models' interface and metadata keys (written by models/export.py).
+# The exported models' interface and metadata keys (written by models/training/export.py).
 INPUT_NAMES: Final[tuple[str, ...]] = ("x", "adj", "mask")
 OUTPUT_NAME: Final[str] = "pose"
 STD_OUTPUT_NAME: Final[str] = "pose_std"  # optional (B, 3): the network's 1-sigma of x, y (m) and yaw (rad)

@@ -64,7 +64,7 @@ class HybridCalibration:
             e.g. a yaw convention of the site's ground truth that differs from the shoulder line.
         net_bias: per camera count 1, 2, 3+, the network pose's typical error (x m, y m, yaw
             rad; the median of its errors on held-out real data), subtracted from it before the
-            fusion (``models.hybrid.NET_DEBIAS``: y only; on dev.json's spatial cross-validation the
+            fusion (``models.hybrid_fit.NET_DEBIAS``: y only; on dev.json's spatial cross-validation the
             network's three-camera y is too large by about 0.1 m in every floor region).
         source: how the numbers were measured (free text, for the model card).
     """

@@ -83,6 +83,19 @@ class _Order(NamedTuple):
     back_ns: int = 0  # ... and stamp
 
 
+class _Views(NamedTuple):
+    """One frame's usable views (K of its N people), as ``Tracker._measure`` finds them."""
+
+    idx: NDArray[np.intp]  # (K,) indices into the frame's people
+    n_joints: NDArray[np.intp]  # (N,) detected joints of every person of the frame
+    ground: NDArray[np.float64]  # (K, 2) ground points
+    sigma: NDArray[np.float64]  # (K,) their 1-sigma, NaN: none
+    has_ground: NDArray[np.bool_]  # (K,)
+    hists: NDArray[np.float32]  # (K, B) flattened histograms
+    has_colour: NDArray[np.bool_]  # (K,) False for an empty histogram
+    amps: NDArray[np.float64]  # (K, B) their amplitudes (association.py)
+
+
 class _Lost(NamedTuple):
     """A removed person, remembered for re-identification."""
 
@@ -173,6 +186,12 @@ class Tracker:
     def update(self, obs: Observation, now_ns: int | None = None) -> list[Match]:
         """Match one camera frame's people to tracks.
 
+        The steps: admit the frame (its order against the camera's earlier frames), measure its
+        views (joints, ground points, colours), associate them with the tracks (each track's
+        position predicted to the frame's time), update the matched tracks, create candidates
+        from the views no track took, and fuse the ground points into the tracks' positions.
+        Removal is ``prune``'s.
+
         Args:
             obs: one frame of one camera.
             now_ns: the host's clock (UNIX ns); the frame's stamp by default. A frame already
@@ -182,53 +201,74 @@ class Tracker:
             One ``Match`` per view of ``obs.people``, in order; empty when the frame was dropped
             (``admit`` says why; ``stats`` counts each reason).
         """
-        st, cfg = self.stats, self.config
         t = int(obs.stamp_ns)
-        now = t if now_ns is None else int(now_ns)
+        if not self._admit_frame(obs, t, t if now_ns is None else int(now_ns)) or not obs.people:
+            return []
+        views = self._measure(obs)
+        matches: list[Match | None] = [None] * len(obs.people)  # the views left None at the end were ignored
+        if len(views.idx):
+            tracks = [tr for tr in self._tracks.values() if t - tr.last_seen_ns < self._remove_ns]
+            rows, cols, colour_d, geo_d, near = self._associate(t, tracks, views.amps, views.has_colour, views.ground,
+                                                                views.sigma, views.has_ground)
+            fused = self._update_matched(obs, t, views, tracks, rows, cols, colour_d, geo_d, matches)
+            fused += self._create(obs, t, views, tracks, rows, cols, near, matches)
+            self._fuse(fused, views, t)
+        return [Match(i, None, "ignored") if m is None else m for i, m in enumerate(matches)]
+
+    def _admit_frame(self, obs: Observation, t: int, now: int) -> bool:
+        """``admit`` the frame, count it, and keep the camera's ordering reference; False: dropped."""
+        st = self.stats
         st["observations"] += 1
         reason = self.admit(obs, now)
         if reason is not None:
             st[reason if reason in ("wrong_site", "unknown_camera") else f"{reason}_dropped"] += 1
             if reason == "seq_backwards":  # remembered: if the next frame follows it, the node restarted
                 self._order[obs.camera] = self._order[obs.camera]._replace(back_seq=int(obs.seq), back_ns=t)
-            return []
-        cam = self._cameras[obs.camera]
+            return False
         # The stamp orders this camera's next frames, capped at the host's clock: a frame from
         # the future is used, but cannot make the camera's real frames look late.
         prev, ref = self._order.get(obs.camera), min(t, now)
         self._order[obs.camera] = _Order(ref if prev is None else max(prev.ref_ns, ref), t, int(obs.seq))
-        n = len(obs.people)
-        st["views"] += n
-        if n == 0:
-            return []
+        st["views"] += len(obs.people)
+        return True
 
+    def _measure(self, obs: Observation) -> _Views:
+        """The frame's views with enough joints, and their ground points and colours."""
+        st, cfg = self.stats, self.config
+        n = len(obs.people)
         kps = np.array([p.keypoints for p in obs.people])  # (N, 17, 3)
         n_joints = (~np.isnan(kps[:, :, 0])).sum(axis=1)  # (N,)
         enough = n_joints >= cfg.min_joints
         st["too_few_joints"] += int(n - enough.sum())
         idx = np.flatnonzero(enough)  # (K,) the views we use
-        if len(idx) == 0:
-            return [Match(i, None, "ignored") for i in range(n)]
-        matches: list[Match | None] = [None] * n  # the views left None at the end were ignored
+        if not len(idx):
+            return _Views(idx, n_joints, np.zeros((0, 2)), np.zeros(0), np.zeros(0, bool), np.zeros((0, _BINS), np.float32),
+                          np.zeros(0, bool), np.zeros((0, _BINS)))
         bboxes = np.array([obs.people[i].bbox for i in idx])  # (K, 4)
-        ground, sigma, _ = ground_points(kps[idx], bboxes, cam)  # (K, 2), (K,)
+        ground, sigma, _ = ground_points(kps[idx], bboxes, self._cameras[obs.camera])  # (K, 2), (K,)
         has_ground = ~np.isnan(sigma)  # (K,)
         st["no_ground_point"] += int((~has_ground).sum())
         hists = np.array([obs.people[i].histogram.reshape(-1) for i in idx])  # (K, B)
-        has_colour = hists.sum(axis=1) > 0  # (K,)
-        amps = _amplitudes(hists)  # (K, B)
+        return _Views(idx, n_joints, ground, sigma, has_ground, hists, hists.sum(axis=1) > 0, _amplitudes(hists))
 
-        tracks = [tr for tr in self._tracks.values() if t - tr.last_seen_ns < self._remove_ns]
-        rows, cols, colour_d, geo_d, near = self._associate(t, tracks, amps, has_colour, ground, sigma, has_ground)
-
-        fused: list[tuple[Track, int]] = []  # (track, row) pairs whose ground point updates the track
-        for r, c in zip(rows, cols):
-            tr, i = tracks[c], int(idx[r])
-            self._apply(tr, obs.camera, t, obs.people[i], hists[r], amps[r], has_colour[r])
+    def _update_matched(self, obs: Observation, t: int, views: _Views, tracks: list[Track], rows: NDArray, cols: NDArray,
+                        colour_d: NDArray, geo_d: NDArray, matches: list[Match | None]) -> list[tuple[Track, int]]:
+        """Apply each matched view to its track; returns the (track, view row) pairs to fuse."""
+        fused: list[tuple[Track, int]] = []
+        for r, c in zip(rows, cols, strict=True):
+            tr, i = tracks[c], int(views.idx[r])
+            self._apply(tr, obs.camera, t, obs.people[i], views.hists[r], views.amps[r], views.has_colour[r])
             fused.append((tr, r))
             matches[i] = Match(i, tr.id, "matched", float(colour_d[r, c]), float(geo_d[r, c]))
-            st["matched"] += 1
-        taken = np.zeros(len(idx), dtype=bool)
+            self.stats["matched"] += 1
+        return fused
+
+    def _create(self, obs: Observation, t: int, views: _Views, tracks: list[Track], rows: NDArray, cols: NDArray,
+                near: NDArray, matches: list[Match | None]) -> list[tuple[Track, int]]:
+        """Start a candidate from each view no track took, where the rules allow (module
+        docstring); returns the (track, view row) pairs to fuse."""
+        st, cfg = self.stats, self.config
+        taken = np.zeros(len(views.idx), dtype=bool)
         taken[rows] = True
         # A track this frame did not see, standing where an unmatched view stands: the view is
         # that person in another camera's light (or a partial view's odd colours), not a
@@ -236,15 +276,16 @@ class Tracker:
         # beside someone is still started by any camera that sees both in one frame.)
         lonely = np.ones(len(tracks), dtype=bool)
         lonely[cols] = False
+        fused: list[tuple[Track, int]] = []
         for r in np.flatnonzero(~taken):
-            i = int(idx[r])
-            if not (has_colour[r] or (has_ground[r] and cfg.use_geometry)):
+            i = int(views.idx[r])
+            if not (views.has_colour[r] or (views.has_ground[r] and cfg.use_geometry)):
                 st["no_signature"] += 1  # nothing to ever match it on again
                 continue
-            if n_joints[i] < cfg.min_joints_new:
+            if views.n_joints[i] < cfg.min_joints_new:
                 st["too_few_joints_new"] += 1
                 continue
-            if cfg.use_geometry and not sigma[r] < cfg.gate_m:  # no ground point, or one less sure than the gate
+            if cfg.use_geometry and not views.sigma[r] < cfg.gate_m:  # no ground point, or one less sure than the gate
                 st["unplaced_new"] += 1
                 continue
             if (near[r] & lonely).any():
@@ -257,14 +298,17 @@ class Tracker:
             self._next_id += 1
             self._tracks[tr.id] = tr
             st["new_candidates"] += 1
-            self._apply(tr, obs.camera, t, obs.people[i], hists[r], amps[r], has_colour[r])
+            self._apply(tr, obs.camera, t, obs.people[i], views.hists[r], views.amps[r], views.has_colour[r])
             fused.append((tr, r))
             matches[i] = Match(i, tr.id, "created")
-        fused = [(tr, r) for tr, r in fused if has_ground[r]]
+        return fused
+
+    def _fuse(self, fused: list[tuple[Track, int]], views: _Views, t: int) -> None:
+        """The ground points of the views applied to their tracks' position filters."""
+        fused = [(tr, r) for tr, r in fused if views.has_ground[r]]
         if fused:
             rs = np.array([r for _, r in fused])
-            fuse_positions([tr for tr, _ in fused], ground[rs], sigma[rs], t, cfg.accel_std_mps2)
-        return [Match(i, None, "ignored") if m is None else m for i, m in enumerate(matches)]
+            fuse_positions([tr for tr, _ in fused], views.ground[rs], views.sigma[rs], t, self.config.accel_std_mps2)
 
     def _associate(
         self, t: int, tracks: list[Track], amps: NDArray, has_colour: NDArray,

@@ -8,7 +8,7 @@ import pytest
 from superbody.edge.camera import Camera, look_at_rotation
 from superbody.edge.floor import in_front, point_in_polygon, seen_by, views_at, visible_floor
 from superbody.edge.site import load_site
-from superbody.models.wtf import load_wtf
+from superbody.models.data.wtf import load_wtf
 from tests.conftest import WTF_SITE
 
 SQUARE = ((0.0, 0.0), (2.0, 0.0), (2.0, 2.0), (0.0, 2.0))

@@ -24,7 +24,7 @@ SITE = str(WTF_SITE)
 # Kept, not re-derived from each card: the card's figure is one run, and runs vary by about 2 deg
 # (regenerated cards since: 40-41 mm, 10.2-10.4 deg; under heavy load up to 48 mm, 14.0 deg).
 # Since the hybrid subtracts the network's three-camera y bias measured on real data (+0.1 m,
-# models.hybrid.NET_DEBIAS), which simulated people do not have, the card's demo reads 52-57 mm,
+# models.hybrid_fit.NET_DEBIAS), which simulated people do not have, the card's demo reads 52-57 mm,
 # 9.7-11.1 deg, and this test's run 46-48 mm, 9.1-10.7 deg (three runs): inside the bounds.
 CARD_POSITION_MM, CARD_YAW_DEG = 41.0, 12.0
 

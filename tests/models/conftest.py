@@ -2,7 +2,7 @@
 
 import pytest
 
-from superbody.models.wtf import RawSample, load_wtf_raw
+from superbody.models.data.wtf import RawSample, load_wtf_raw
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,7 @@ torch = pytest.importorskip("torch")
 from superbody.host.estimation.graph import GraphSpec, build_batch  # noqa: E402
 from superbody.models.fast_gat import FastGAT  # noqa: E402
 from superbody.models.nets import build_model  # noqa: E402
-from tests.models.test_export import SITE, people  # noqa: E402
+from tests.models.training.test_export import SITE, people  # noqa: E402
 
 
 @pytest.mark.parametrize(
@@ -53,7 +53,7 @@ def test_reexport_gives_the_same_poses_and_keeps_the_metadata(tmp_path):
     import onnx
 
     from superbody.host.estimation.estimator import OnnxEstimator
-    from superbody.models.export import export_onnx, read_metadata, reexport
+    from superbody.models.training.export import export_onnx, read_metadata, reexport
 
     torch.manual_seed(0)
     spec = GraphSpec.for_site(SITE, "rays", max_views=3, geometry=True)

@@ -11,7 +11,7 @@ from superbody.edge.angles import wrap_angle
 from superbody.edge.sim import NoiseModel, PersonState, World, render_views, skeleton
 from superbody.edge.site import load_site
 from superbody.host.estimation.analytic import AnalyticEstimator, joints_3d, pair_points, triangulate
-from superbody.models.wtf import load_wtf
+from superbody.models.data.wtf import load_wtf
 from tests.conftest import WTF_SITE
 
 

@@ -51,7 +51,7 @@ def people(n: int, seed: int = 0, cameras=("1", "2", "3")) -> list[dict[str, Per
 def models(tmp_path_factory):
     """Tiny exported models: GAT "site" and RGCN "rays"; with their PyTorch originals."""
     from superbody.host.estimation.graph import floor_centre
-    from superbody.models.export import export_onnx
+    from superbody.models.training.export import export_onnx
     from superbody.models.nets import build_model
 
     out = {}

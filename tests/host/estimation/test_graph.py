@@ -448,7 +448,7 @@ def test_unknown_feature_group():
 def test_adjacency_is_the_template_masked_by_present_nodes():
     from superbody.edge.site import load_site
     from superbody.host.estimation.graph import adjacency_template
-    from superbody.models.simdata import SimDataConfig, generate
+    from superbody.models.data.simdata import SimDataConfig, generate
     from tests.conftest import WTF_SITE
 
     site = load_site(WTF_SITE)

@@ -6,8 +6,8 @@ import numpy as np
 
 from superbody.edge import body
 from superbody.edge.site import load_site
-from superbody.models.simstats import facing_rates, simulate, statistics
-from superbody.models.wtf import load_wtf
+from superbody.models.data.simstats import facing_rates, simulate, statistics
+from superbody.models.data.wtf import load_wtf
 from tests.conftest import WTF_SITE
 
 

@@ -7,7 +7,7 @@ import pytest
 
 from superbody.edge.camera import project
 from superbody.edge.site import load_site
-from superbody.models.simdata import SimDataConfig, generate, load_samples, random_site, save_samples
+from superbody.models.data.simdata import SimDataConfig, generate, load_samples, random_site, save_samples
 from tests.conftest import WTF_SITE
 
 

@@ -10,7 +10,7 @@ epoch (DS1-like mix), and with ``real_subset_repeat`` every proper subset of a r
 as well (one real frame seen by three cameras is also three real single-view frames and three
 two-view frames, with the same truth: real detector noise for the hard camera counts, in the
 places the multi-camera frames were taken). Real ground truth is converted to the torso centre the product reports
-(models.wtf.truth_to_torso). ``real_exclude`` holds out a contiguous range of the real file
+(models.data.wtf.truth_to_torso). ``real_exclude`` holds out a contiguous range of the real file
 (cross-validation folds).
 
 Graphs are built once, keeping x and mask only; each mini-batch rebuilds its adjacency from
@@ -39,7 +39,7 @@ from tqdm import tqdm
 from superbody.edge.angles import wrap_angle
 from superbody.edge.site import Site, SiteError, load_site
 from superbody.host.estimation.graph import GraphBatch, GraphSpec, adjacency_template, build_batch, floor_centre, masked_adjacency
-from superbody.models.samples import Sample
+from superbody.models.data.samples import Sample
 
 __all__ = ["TrainConfig", "TrainResult", "train", "prepare", "view_subsets", "register"]
 
@@ -147,7 +147,7 @@ def prepare(samples: list[Sample], site: Site, spec: GraphSpec, model, chunk: in
 
 def _datasets(cfg: TrainConfig, site: Site, spec: GraphSpec, model, progress: bool) -> tuple[NDArray, NDArray, NDArray, NDArray]:
     """Training arrays and a per-sample weight of 'real' (1) or simulated (0)."""
-    from superbody.models.simdata import SimDataConfig, generate, random_site
+    from superbody.models.data.simdata import SimDataConfig, generate, random_site
 
     parts: list[tuple[NDArray, NDArray, NDArray, NDArray]] = []
     if cfg.sim_samples:
@@ -164,7 +164,7 @@ def _datasets(cfg: TrainConfig, site: Site, spec: GraphSpec, model, progress: bo
             x, m, y = prepare(samples, site, spec, model)
             parts.append((x, m, y, np.zeros(len(x), np.float32)))
     if cfg.real:
-        from superbody.models.wtf import load_wtf, truth_to_torso
+        from superbody.models.data.wtf import load_wtf, truth_to_torso
 
         real = load_wtf(cfg.real, site=site if cfg.use_3d else None)
         drop = set(cfg.real_holdout)
@@ -288,6 +288,8 @@ def train(cfg: TrainConfig, progress: bool = True) -> TrainResult:
 def _predict(model, forward, idx: NDArray, batch: int) -> tuple[NDArray, NDArray]:
     import torch
 
+    from superbody.models.nets import OUT_DIM
+
     model.eval()
     outs, ys = [], []
     with torch.no_grad():
@@ -305,7 +307,7 @@ def save(result: TrainResult, cfg: TrainConfig, out_dir: str | Path, name: str, 
     """Write <name>.pt (state and config), <name>.fp32.onnx, <name>.int8.onnx and <name>.train.json."""
     import torch
 
-    from superbody.models.export import export_onnx, quantize_int8
+    from superbody.models.training.export import export_onnx, quantize_int8
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -1,8 +1,8 @@
 """Evaluation against WheresTheFellow ground truth: the paper's metrics, MAEs, a table, a CSV.
 
 The product's estimators report the person's *torso centre*; the dataset's ground truth is a
-chest-worn tracker about ``models.wtf.TRUTH_OFFSET_M`` in front of it. Every prediction is
-therefore moved forward along its own yaw by ``truth_offset_m`` (``models.wtf.torso_to_truth``)
+chest-worn tracker about ``models.data.wtf.TRUTH_OFFSET_M`` in front of it. Every prediction is
+therefore moved forward along its own yaw by ``truth_offset_m`` (``models.data.wtf.torso_to_truth``)
 before it is compared with the truth; every report says which offset was used.
 
 Metrics, per estimator (``summarise``), overall and by the number of cameras that saw the person:
@@ -36,8 +36,8 @@ from tqdm import tqdm
 
 from superbody.edge.angles import wrap_angle
 from superbody.host.estimation.estimator import Estimator
-from superbody.models.samples import Sample
-from superbody.models.wtf import CAMERA_IDS, to_dataset_frame, torso_to_truth
+from superbody.models.data.samples import Sample
+from superbody.models.data.wtf import CAMERA_IDS, to_dataset_frame, torso_to_truth
 
 __all__ = [
     "PAPER_POSITION_SCALE_MM",
@@ -163,7 +163,7 @@ def summarise(pred: NDArray, truth: NDArray, cameras: NDArray, truth_offset_m: f
         pred: (N, 3) the estimator's torso poses (x, y, yaw), REP-103.
         truth: (N, 3) the dataset's ground truth (the chest tracker), REP-103.
         cameras: (N,) cameras per sample (``camera_counts``).
-        truth_offset_m: how far in front of the torso the truth is (``models.wtf.TRUTH_OFFSET_M``).
+        truth_offset_m: how far in front of the torso the truth is (``models.data.wtf.TRUTH_OFFSET_M``).
 
     Returns:
         ``{"samples", "failed", "position_mae_mm": {"x", "y"}, "yaw_mae_deg",
@@ -255,10 +255,10 @@ def evaluate(
     """Run each estimator on the samples and score it against their ground truth.
 
     Args:
-        samples: e.g. ``models.wtf.load_wtf(path, site=site)``.
+        samples: e.g. ``models.data.wtf.load_wtf(path, site=site)``.
         estimators: name -> estimator.
         truth_offset_m: how far in front of the torso centre the truth is measured
-            (``models.wtf.TRUTH_OFFSET_M`` for WheresTheFellow; 0 for truth at the torso).
+            (``models.data.wtf.TRUTH_OFFSET_M`` for WheresTheFellow; 0 for truth at the torso).
 
     Returns:
         name -> report, see ``summarise``.

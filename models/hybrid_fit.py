@@ -42,7 +42,7 @@ from superbody.edge.angles import wrap_angle
 from superbody.edge.site import Site
 from superbody.host.estimation.estimator import META_STD_SCALE
 from superbody.host.estimation.hybrid import META_HYBRID, HybridCalibration, combine, fuse
-from superbody.models.samples import Sample
+from superbody.models.data.samples import Sample
 
 __all__ = ["robust_sigma", "fit_std_scale", "scaled_std", "fit_trust", "TRUST_GRID", "POSITION_SE", "fit_analytic", "fit_net_bias", "NET_DEBIAS", "fit_calibration", "hybrid_poses", "leave_one_fold_out", "sigma_coverage", "write_calibration"]
 

@@ -12,7 +12,7 @@ poses (x_k, y_k, yaw_k) and 1-sigmas (sx_k, sy_k, syaw_k), with u_k = (sin yaw_k
   few degrees members differ by; at most 2 where the angle is pi).
 
 ``combine`` does it on arrays (held-out predictions of cross-validations, one per member).
-``models.export.export_onnx`` given several networks does the same sums inside one ONNX graph
+``models.training.export.export_onnx`` given several networks does the same sums inside one ONNX graph
 with the single model's interface (pose (B, 4) = x, y, and the mean unit heading vector as sin,
 cos: yaw = atan2; pose_std (B, 3)), so the host runs an ensemble like any model.
 """
@@ -96,7 +96,7 @@ def load_member(path: str | Path):
 def calibration_graphs(site, spec, samples: int = 512, seed: int = 0) -> list:
     """Graph batches of ``samples`` people simulated in the site, for int8 calibration."""
     from superbody.host.estimation.graph import build_batch
-    from superbody.models.simdata import SimDataConfig, generate
+    from superbody.models.data.simdata import SimDataConfig, generate
 
     sim = generate(site, SimDataConfig(samples=samples, seed=seed, depth=spec.use_3d), progress=False)
     views = [s.views for s in sim]
@@ -104,7 +104,7 @@ def calibration_graphs(site, spec, samples: int = 512, seed: int = 0) -> list:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from superbody.models.export import export_onnx, quantize_int8
+    from superbody.models.training.export import export_onnx, quantize_int8
 
     command = "superbody ensemble"
     if len(args.member) < 2:
@@ -141,7 +141,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "ensemble", help="combine trained networks into one ONNX model (fp32 + int8)",
         description="Export networks trained alike (superbody train checkpoints, .pt) as one ONNX model that combines their "
-                    "estimates (models/ensemble.py): mean position, circular-mean yaw, the sigma of their mixture.",
+                    "estimates (models/training/ensemble.py): mean position, circular-mean yaw, the sigma of their mixture.",
     )
     p.add_argument("--member", action="append", default=[], metavar="M.pt", help="a member's checkpoint (repeat: at least two)")
     p.add_argument("--out", default="build/models", help="output folder (default build/models)")

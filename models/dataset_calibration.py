@@ -31,7 +31,7 @@ from superbody.edge.body import INDEX
 from superbody.edge.camera import Camera, project
 from superbody.edge.floor import visible_floor
 from superbody.edge.site import Site
-from superbody.models.wtf import CAMERA_IDS, IMAGE_HEIGHT, IMAGE_WIDTH, RawSample
+from superbody.models.data.wtf import CAMERA_IDS, IMAGE_HEIGHT, IMAGE_WIDTH, RawSample
 
 __all__ = [
     "MIN_POINTS",
@@ -280,7 +280,7 @@ def calibrate_dataset(
     (the data does not show them).
 
     Args:
-        raw: the samples from ``models.wtf.load_wtf_raw``.
+        raw: the samples from ``models.data.wtf.load_wtf_raw``.
         name: site name.
         fps: publishing rate written for every camera.
         refine: refine each camera after the DLT.

@@ -14,7 +14,7 @@ import pytest
 
 from superbody.edge.camera import Camera, look_at_rotation, project
 from superbody.edge.site import load_site
-from superbody.models.calibrate import (
+from superbody.models.dataset_calibration import (
     calibrate_dataset,
     dataset_pairs,
     decompose_projection,

@@ -4,8 +4,8 @@ matplotlib is imported inside the functions (object API on the Agg canvas, no py
 importing this module, and the host, never needs it.
 
 All poses here are REP-103 (x, y, yaw). Predictions are torso poses and are moved to the
-dataset's chest-tracker point (``models.wtf.torso_to_truth``) by ``truth_offset_m`` first, as in
-``models.evaluate``.
+dataset's chest-tracker point (``models.data.wtf.torso_to_truth``) by ``truth_offset_m`` first, as in
+``models.evaluation.evaluate``.
 """
 
 from __future__ import annotations
@@ -17,9 +17,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from superbody.edge.angles import wrap_angle
-from superbody.models.evaluate import CAMERA_COUNTS, camera_counts, sample_errors
-from superbody.models.samples import Sample
-from superbody.models.wtf import torso_to_truth
+from superbody.models.data.samples import Sample
+from superbody.models.data.wtf import torso_to_truth
+from superbody.models.evaluation.evaluate import CAMERA_COUNTS, camera_counts, sample_errors
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -115,7 +115,7 @@ def plot_error_bars(path: str | Path, errors: Mapping[str, NDArray]) -> Path:
 
     Args:
         path: the PNG to write.
-        errors: name -> (n, 3) per-sample absolute errors (``models.evaluate.sample_errors``),
+        errors: name -> (n, 3) per-sample absolute errors (``models.evaluation.evaluate.sample_errors``),
             failed samples left out.
     """
     names = list(errors)

@@ -48,7 +48,7 @@ from superbody.edge.body import INDEX, KEYPOINTS, NUM_KEYPOINTS
 from superbody.edge.camera import Camera, world_to_camera
 from superbody.edge.messages.observation import PersonView, empty_histogram
 from superbody.edge.site import Site
-from superbody.models.samples import Sample
+from superbody.models.data.samples import Sample
 
 __all__ = [
     "CAMERA_IDS",

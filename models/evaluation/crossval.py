@@ -19,15 +19,15 @@ camera count, fold) for calibrating the hybrid estimator (``superbody calibrate-
 
 ``--temporal`` also gives the live system's figures on the cross-validation: each fold's model
 is exported as ``superbody train`` writes it, given the hybrid calibration fitted on the other
-folds' held-out predictions (``models.hybrid.fit_calibration``), and the whole recording is
-replayed through the host's aggregator with it (``models.temporal.replay``: tracker, estimator,
+folds' held-out predictions (``models.hybrid_fit.fit_calibration``), and the whole recording is
+replayed through the host's aggregator with it (``models.evaluation.temporal.replay``: tracker, estimator,
 filter, as ``superbody eval --temporal``); the fold's own samples are scored on what the host
 publishes at their capture times. Every sample is thus scored on a live host whose model and
 calibration never saw it, with the network alone, the hybrid, and geometry alone beside them.
 ``--models-out DIR`` (with ``--temporal``) keeps those fold models, ``DIR/fold<k>.fp32.onnx``
 each with its calibration from the other folds, so that a change to the host (tracker, filter,
 set S) can be scored live on the cross-validation again without retraining
-(``models.temporal.replay`` on fold k's samples, ``fold`` in ``--predictions-out``).
+(``models.evaluation.temporal.replay`` on fold k's samples, ``fold`` in ``--predictions-out``).
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from superbody.edge.site import SiteError, load_site
-from superbody.models.train import TrainConfig, add_train_args, config_from_args, train
+from superbody.models.training.train import TrainConfig, add_train_args, config_from_args, train
 
 __all__ = ["fold_ranges", "spatial_folds", "crossvalidate", "register", "SPLITS"]
 
@@ -111,13 +111,13 @@ def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = N
 
     Returns:
         ``{"folds": [...], "reports": {"model": report, "analytic": report}, "predictions",
-        "std", "analytic", ...}`` with reports as ``models.evaluate.summarise`` gives them.
+        "std", "analytic", ...}`` with reports as ``models.evaluation.evaluate.summarise`` gives them.
     """
     from superbody.host.estimation.estimator import OnnxEstimator
-    from superbody.models.evaluate import score
-    from superbody.models.hybrid import analytic_with_pairs
-    from superbody.models.train import save
-    from superbody.models.wtf import TRUTH_OFFSET_M, load_wtf_raw, to_samples
+    from superbody.models.data.wtf import TRUTH_OFFSET_M, load_wtf_raw, to_samples
+    from superbody.models.evaluation.evaluate import score
+    from superbody.models.hybrid_fit import analytic_with_pairs
+    from superbody.models.training.train import save
 
     if not cfg.real:
         raise ValueError("cross-validation needs real data (--real)")
@@ -180,18 +180,18 @@ def _temporal(raw, samples, site, pred: NDArray, std: NDArray, analytic: NDArray
     from superbody.host.estimation.analytic import AnalyticEstimator
     from superbody.host.estimation.estimator import OnnxEstimator
     from superbody.host.estimation.hybrid import HybridEstimator
-    from superbody.models import hybrid
-    from superbody.models.temporal import replay, view_stamps
-    from superbody.models.wtf import truth_to_torso
+    from superbody.models import hybrid_fit
+    from superbody.models.data.wtf import truth_to_torso
+    from superbody.models.evaluation.temporal import replay, view_stamps
 
     stamps = view_stamps(raw)
     truth = truth_to_torso(np.array([s.truth for s in samples]), offset)
     cams = np.array([len(s.views) for s in samples])
-    lofo = hybrid.leave_one_fold_out(pred, std, analytic, pair, truth, cams, fold_of, site)[0]
+    lofo = hybrid_fit.leave_one_fold_out(pred, std, analytic, pair, truth, cams, fold_of, site)[0]
     net_live, hyb_live = np.full_like(pred, np.nan), np.full_like(pred, np.nan)
     for k, path in fp32_models.items():
         held, train = fold_of == k, fold_of != k
-        hybrid.write_calibration(path, *hybrid.fit_calibration(pred[train], std[train], analytic[train], pair[train], truth[train], cams[train]))
+        hybrid_fit.write_calibration(path, *hybrid_fit.fit_calibration(pred[train], std[train], analytic[train], pair[train], truth[train], cams[train]))
         net = OnnxEstimator(path, site)  # the host's --estimator onnx on it: the calibrated sigmas feed the filter
         net_live[held] = replay(samples, stamps, pred, site, net, f"onnx:fold{k}").poses[held]
         hyb_live[held] = replay(samples, stamps, lofo, site, HybridEstimator(net, site), f"hybrid:fold{k}").poses[held]
@@ -224,7 +224,7 @@ class _TorchEstimator:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from superbody.models.evaluate import format_table
+    from superbody.models.evaluation.evaluate import format_table
 
     try:
         cfg = config_from_args(args)

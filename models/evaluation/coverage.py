@@ -122,8 +122,8 @@ def coverage_figures(site: Site, train_truth: NDArray, test_truth: NDArray, test
 def _run(args: argparse.Namespace) -> int:
     from superbody.edge.site import SiteError, load_site
     from superbody.host.estimation import build_estimator
-    from superbody.models.evaluate import predict
-    from superbody.models.simdata import SimDataConfig, generate
+    from superbody.models.data.simdata import SimDataConfig, generate
+    from superbody.models.evaluation.evaluate import predict
 
     try:
         site = load_site(args.site)
@@ -135,7 +135,7 @@ def _run(args: argparse.Namespace) -> int:
                 raise ValueError(f"{flag} must be in [{lo}, {hi}], got {v}")
         real_xy = None
         if args.dataset:
-            from superbody.models.wtf import load_wtf, truth_to_torso
+            from superbody.models.data.wtf import load_wtf, truth_to_torso
 
             real_xy = truth_to_torso(np.array([s.truth for s in load_wtf(args.dataset, site)]))[:, :2]
     except (SiteError, ValueError) as e:

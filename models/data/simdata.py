@@ -7,7 +7,7 @@ so the result depends only on the config, not on the number of workers.
 
 Ground truth: the torso centre, what the product reports. ``truth_offset_m`` can move it
 forward (to imitate a chest-worn tracker such as the WheresTheFellow ground truth; the
-project instead converts that dataset's truth, see models.wtf.truth_to_torso).
+project instead converts that dataset's truth, see models.data.wtf.truth_to_torso).
 
 ``random_site(rng)`` makes plausible rooms with 2-5 wall-mounted cameras, for the
 site-independent ("rays") model.
@@ -30,7 +30,7 @@ from superbody.edge.messages.observation import PersonView
 from superbody.edge.sim import NoiseModel, PersonState, World, render_views
 from superbody.edge.sim.world import _free_space
 from superbody.edge.site import Obstacle, Site
-from superbody.models.samples import Sample
+from superbody.models.data.samples import Sample
 
 __all__ = ["SimDataConfig", "generate", "random_site", "save_samples", "load_samples"]
 _CHUNK = 400

@@ -17,7 +17,7 @@ yaw = atan2(sin, cos).
 Metadata (``metadata_props``, all strings): the GraphSpec (``graph.*``), ``pose.frame``,
 ``pose.scale``, ``pose.origin`` (JSON [x, y]), ``model.config`` (JSON: arch, hyper-parameters,
 normalisation), ``train.config`` (JSON: the training run's config), ``ensemble.members`` for
-an ensemble (several networks combined in the graph, ``models.ensemble``), and for int8 models
+an ensemble (several networks combined in the graph, ``models.training.ensemble``), and for int8 models
 ``quant.*`` (format, node-name fragments kept in fp32 and how many products they kept and
 quantised, calibration size, source file, and ``quant.drift``:
 how far the int8 poses are from the fp32 ones on the calibration graphs).
@@ -109,7 +109,7 @@ class _ExportedPose(nn.Module):
 
 class _ExportedEnsemble(nn.Module):
     """Several ``_ExportedPose`` as one: the members' poses and sigmas combined as
-    ``models.ensemble.combine`` does (mean position, circular-mean yaw as a unit (sin, cos), the
+    ``models.training.ensemble.combine`` does (mean position, circular-mean yaw as a unit (sin, cos), the
     sigma of the members' equal mixture)."""
 
     def __init__(self, members: Sequence[_ExportedPose]):
@@ -171,7 +171,7 @@ def export_onnx(model: PoseNet | Sequence[PoseNet], spec: GraphSpec, config: Map
 
     Args:
         model: a network from ``models.nets.build_model``, or several alike (same spec, scale
-            and origin): an ensemble, combined inside the graph as ``models.ensemble.combine``
+            and origin): an ensemble, combined inside the graph as ``models.training.ensemble.combine``
             does (metadata ``ensemble.members``: how many).
         spec: the graph spec it was built for (must equal ``model.spec``).
         config: the training config to store (JSON-able; other values are stored as str()).
@@ -227,7 +227,7 @@ def export_onnx(model: PoseNet | Sequence[PoseNet], spec: GraphSpec, config: Map
                         "sin yaw, cos yaw; pose_std (batch, 3) = predicted 1-sigma of x, y (m) and yaw (rad)")
     meta = _metadata(model, spec, config)
     if len(models) > 1:
-        proto.doc_string += f"; an ensemble of {len(models)} networks (models.ensemble)"
+        proto.doc_string += f"; an ensemble of {len(models)} networks (models.training.ensemble)"
         meta[META_ENSEMBLE] = str(len(models))
     meta[META_EXPORT_FORMULATION] = formulation
     meta[META_READS_ADJ] = "false" if formulation == "fast_gat" or model.arch == "mlp" else "true"
@@ -425,7 +425,7 @@ def reexport(src: str | Path, dst: str | Path, fast: bool = True, opset: int = 1
 
 
 if __name__ == "__main__":
-    # python -m superbody.models.export models/wtf-apartment.fp32.onnx [...]: re-export shipped
+    # python -m superbody.models.training.export models/wtf-apartment.fp32.onnx [...]: re-export shipped
     # fp32 models in place (e.g. as the fast GAT), keeping their metadata.
     import argparse
     import sys

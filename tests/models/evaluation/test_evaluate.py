@@ -15,7 +15,7 @@ from superbody.edge.angles import wrap_angle
 from superbody.edge.site import load_site
 from superbody.host.estimation.analytic import AnalyticEstimator
 from superbody.host.estimation.graph import GraphSpec, floor_centre
-from superbody.models.evaluate import (
+from superbody.models.evaluation.evaluate import (
     PREDICTIONS_HEADER,
     evaluate,
     format_table,
@@ -26,7 +26,7 @@ from superbody.models.evaluate import (
     score,
     write_predictions_csv,
 )
-from superbody.models.wtf import TRUTH_OFFSET_M, load_wtf, truth_to_torso
+from superbody.models.data.wtf import TRUTH_OFFSET_M, load_wtf, truth_to_torso
 from tests.conftest import LAB_SITE, ROOT, WTF_SITE
 
 SITE = load_site(WTF_SITE)
@@ -47,7 +47,7 @@ def models(tmp_path_factory):
     """Untrained ONNX models: one for the wtf-apartment site, one for another site."""
     pytest.importorskip("torch")
     pytest.importorskip("onnx")
-    from superbody.models.export import export_onnx
+    from superbody.models.training.export import export_onnx
     from superbody.models.nets import build_model
 
     out = tmp_path_factory.mktemp("models")
@@ -209,7 +209,7 @@ def test_predictions_csv_is_in_the_dataset_frame(samples, dev_json, tmp_path, of
 
 def test_plots_are_written(samples, tmp_path):
     pytest.importorskip("matplotlib")
-    from superbody.models.plots import PLOT_FILES, write_plots
+    from superbody.models.evaluation.plots import PLOT_FILES, write_plots
 
     preds = {"analytic": predict(samples, AnalyticEstimator(SITE)), "blind": predict(samples, BlindEstimator(samples))}
     paths = write_plots(tmp_path / "plots", samples, preds, TRUTH_OFFSET_M)

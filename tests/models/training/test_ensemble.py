@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from superbody.models.ensemble import combine
+from superbody.models.training.ensemble import combine
 from tests.conftest import ROOT, WTF_SITE
 
 DEG = math.pi / 180
@@ -53,9 +53,9 @@ def test_exported_ensemble_equals_combining_its_members_exported_alone(tmp_path)
     from superbody.edge.site import load_site
     from superbody.host.estimation.estimator import OnnxEstimator
     from superbody.host.estimation.graph import GraphSpec, floor_centre
-    from superbody.models.export import META_ENSEMBLE, export_onnx, load_onnx_model, read_metadata
+    from superbody.models.training.export import META_ENSEMBLE, export_onnx, load_onnx_model, read_metadata
     from superbody.models.nets import build_model
-    from superbody.models.simdata import SimDataConfig, generate
+    from superbody.models.data.simdata import SimDataConfig, generate
 
     site = load_site(WTF_SITE)
     spec = GraphSpec.for_site(site, geometry=True)
@@ -93,7 +93,7 @@ def test_ensemble_command_exports_fp32_and_int8_from_checkpoints(tmp_path):
     assert "an ensemble of 2 gat networks" in r.stdout
     from superbody.edge.site import load_site
     from superbody.host.estimation.estimator import OnnxEstimator
-    from superbody.models.simdata import SimDataConfig, generate
+    from superbody.models.data.simdata import SimDataConfig, generate
 
     site = load_site(WTF_SITE)
     views = [s.views for s in generate(site, SimDataConfig(samples=64, seed=9), progress=False)]
@@ -115,7 +115,7 @@ def test_calibrate_hybrid_combines_an_ensembles_cross_validations(dev_json, tmp_
     # calibrated as one ensemble, the network's figures are those of combine(); folds that differ
     # are refused.
     from superbody.edge.site import load_site
-    from superbody.models.wtf import TRUTH_OFFSET_M, load_wtf, truth_to_torso
+    from superbody.models.data.wtf import TRUTH_OFFSET_M, load_wtf, truth_to_torso
 
     samples = load_wtf(dev_json, site=load_site(WTF_SITE))
     truth = np.array([s.truth for s in samples])

@@ -16,8 +16,8 @@ from superbody.edge.angles import wrap_angle
 from superbody.edge.body import LEFT_HIP, LEFT_SHOULDER, NOSE, NUM_KEYPOINTS, RIGHT_HIP, RIGHT_SHOULDER
 from superbody.edge.colour import HIST_BINS
 from superbody.edge.site import load_site
-from superbody.models.calibrate import decompose_projection, normalised_dlt
-from superbody.models.wtf import (
+from superbody.models.dataset_calibration import decompose_projection, normalised_dlt
+from superbody.models.data.wtf import (
     DatasetError,
     RawSample,
     from_dataset_frame,
@@ -393,7 +393,7 @@ def test_keypoint_bbox(uv, expected):
 
 
 def test_truth_offset_round_trip():
-    from superbody.models.wtf import TRUTH_OFFSET_M, torso_to_truth, truth_to_torso
+    from superbody.models.data.wtf import TRUTH_OFFSET_M, torso_to_truth, truth_to_torso
     pose = np.array([[1.0, 2.0, 0.0], [0.0, 0.0, np.pi / 2]])
     chest = torso_to_truth(pose)
     np.testing.assert_allclose(chest[:, :2] - pose[:, :2], [[TRUTH_OFFSET_M, 0.0], [0.0, TRUTH_OFFSET_M]], atol=1e-12)
