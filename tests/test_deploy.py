@@ -26,7 +26,7 @@ SYSTEMD = ROOT / "deploy" / "systemd"
 CONTAINERFILE = ROOT / "deploy" / "container" / "Containerfile"
 UNITS = sorted(p.name for p in SYSTEMD.iterdir() if p.suffix in (".service", ".target"))
 SERVICES = [u for u in UNITS if u.endswith(".service")]
-BINARY = "/opt/superbody/bin/superbody"  # where the README's "Deploy on a site" installs it
+BINARY = "/opt/superbody/bin/superbody"  # where docs/install.md installs it
 
 # The keys these units may use, by section: a typo'd key is an error here, not a silent no-op.
 KNOWN = {
