@@ -1,4 +1,4 @@
-"""The ``superbody`` console script.
+"""The ``superbody`` console script, and the edge package's commands (``edge run``, ``router``).
 
 One program, subcommands contributed by each package: every entry point in the
 ``superbody.commands`` group is a ``register(subparsers)`` function that adds its commands and
@@ -10,8 +10,19 @@ from __future__ import annotations
 import argparse
 import logging
 import re
+import signal
 import sys
+import threading
 from importlib.metadata import entry_points
+
+from superbody.edge import transport
+from superbody.edge.cli_args import add_clock_args, add_session_args, clock_from_args, config_from_args, int_in, positive
+from superbody.edge.detectors import DETECTOR_FORMS, DetectorSpec, parse_detector
+from superbody.edge.detectors.base import DetectorError
+from superbody.edge.node import DEFAULT_OAK_MODEL, SOURCE_FORMS, SourceSpec, open_source, parse_source, run_node
+from superbody.edge.router import run_router
+from superbody.edge.site import SiteError, load_site
+from superbody.edge.sources.source import SourceError
 
 __all__ = ["main", "register", "build_parser"]
 
@@ -67,11 +78,137 @@ def main(argv: list[str] | None = None) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the edge package's commands: ``edge run``, ``router``."""
-    from superbody.edge import node, router
-
-    node.register(sub)
-    router.register(sub)
+    _register_node(sub)
+    _register_router(sub)
 
 
 if __name__ == "__main__":
     sys.exit(main())
+
+
+def _source_arg(text: str) -> SourceSpec:
+    try:
+        return parse_source(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def _detector_arg(text: str) -> DetectorSpec:
+    try:
+        return parse_detector(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def _check_options(args: argparse.Namespace) -> None:
+    """Options that only some sources take; ``ValueError`` naming the option otherwise."""
+    spec: SourceSpec = args.source
+    if spec.needs_detector and args.detector is None:
+        raise ValueError(f"--source {spec} needs --detector, one of {', '.join(DETECTOR_FORMS)}")
+    if not spec.needs_detector and args.detector is not None:
+        raise ValueError(f"--detector is for video, webcam and RTSP sources; --source {spec} detects people itself")
+    only = {
+        "sim": [("--seed", args.seed), ("--people", args.people)],
+        "oak": [("--nn-archive", args.nn_archive), ("--oak-model", args.oak_model)],
+        "video": [("--fast", args.fast or None)],
+        "replay": [("--replay-start-ns", args.replay_start_ns)],
+    }
+    for kind, options in only.items():
+        for name, value in options:
+            if value is not None and spec.kind != kind:
+                raise ValueError(f"{name} is for --source {kind}, not --source {spec}")
+    if args.loop and spec.kind not in ("video", "replay"):
+        raise ValueError(f"--loop is for --source video and replay, not --source {spec}")
+    if args.depth and spec.kind not in ("sim", "oak"):
+        raise ValueError(f"--depth is for --source sim and oak, not --source {spec}")
+    if spec.kind != "sim" and (args.clock_scale != 1.0 or args.clock_anchor_ns != 0):
+        raise ValueError(f"--clock-scale and --clock-anchor-ns are for simulated sources; --source {spec} runs on the wall clock")
+
+
+def _run_node(args: argparse.Namespace) -> int:
+    def error(message: object, code: int = 2) -> int:
+        print(f"superbody edge run: error: {message}", file=sys.stderr)
+        return code
+
+    try:
+        site = load_site(args.site)
+        site.camera(args.camera)
+        _check_options(args)
+        clock = clock_from_args(args)
+        conf = config_from_args(args)
+    except (SiteError, KeyError, ValueError) as e:
+        return error(e.args[0] if e.args else e)
+    spec: SourceSpec = args.source
+    try:
+        source = open_source(spec, site, args.camera, seed=args.seed or 0, people=3 if args.people is None else args.people,
+                             depth=args.depth, clock=clock, nn_archive=args.nn_archive,
+                             oak_model=args.oak_model or DEFAULT_OAK_MODEL, realtime=not args.fast, loop=args.loop,
+                             replay_start_ns=args.replay_start_ns)
+    except SourceError as e:
+        return error(e)
+    detector = None
+    if args.detector is not None:
+        from superbody.edge.detectors import open_detector
+
+        try:
+            detector = open_detector(args.detector)
+        except DetectorError as e:
+            source.close()
+            return error(f"--detector {args.detector}: {e}")
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    try:
+        run_node(conf, site, args.camera, source, clock, args.duration, stop, detector=detector)
+    except (SourceError, DetectorError) as e:
+        return error(e, 1)
+    finally:
+        if detector is not None:
+            detector.close()
+    return 0
+
+
+def _register_node(sub: argparse._SubParsersAction) -> None:
+    edge = sub.add_parser("edge", help="camera-node commands")
+    edge_sub = edge.add_subparsers(dest="edge_command", metavar="COMMAND", required=True)
+    p = edge_sub.add_parser("run", help="run a camera node: capture, detect, publish Observations")
+    p.add_argument("--site", required=True, help="site file (TOML)")
+    p.add_argument("--camera", required=True, help="camera id in the site file")
+    p.add_argument("--source", type=_source_arg, default=SourceSpec("sim"), metavar="SOURCE",
+                   help=f"frame source: {', '.join(SOURCE_FORMS)} (default: sim)")
+    p.add_argument("--detector", type=_detector_arg, default=None, metavar="DETECTOR",
+                   help=f"host pose detector for video, webcam and RTSP sources: {', '.join(DETECTOR_FORMS)}")
+    p.add_argument("--seed", type=int, default=None, help="sim: seed; nodes with the same seed see the same people (default 0)")
+    p.add_argument("--people", type=int_in(0, 64, "--people"), default=None, help="sim: simulated people (default 3)")
+    p.add_argument("--depth", action="store_true", help="sim: simulate a depth camera; oak: stereo depth per keypoint")
+    p.add_argument("--nn-archive", default=None, metavar="PATH", help="oak: a local NN archive instead of the model zoo's")
+    p.add_argument("--oak-model", default=None, metavar="NAME", help=f"oak: model zoo name (default {DEFAULT_OAK_MODEL})")
+    p.add_argument("--fast", action="store_true", help="video: read frames as fast as the detector goes, not in real time")
+    p.add_argument("--loop", action="store_true", help="video, replay: start the file again at its end")
+    p.add_argument("--replay-start-ns", type=int_in(0, 2**63 - 1, "--replay-start-ns"), default=None, metavar="NS",
+                   help="replay: wall time (UNIX ns) at which the recording's first observation is replayed; "
+                        "give every camera replayed from one file the same (default: when the node starts)")
+    p.add_argument("--duration", type=positive, default=None, help="stop after this many seconds of world time")
+    add_clock_args(p)
+    add_session_args(p)
+    p.set_defaults(func=_run_node)
+
+
+def _run_router(args: argparse.Namespace) -> int:
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    try:
+        run_router(args.listen or ([] if args.config else [transport.DEFAULT_ENDPOINT]), stop, args.config, args.cfg)
+    except transport.ConfigError as e:
+        print(f"superbody router: error: {e}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def _register_router(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("router", help="run a Zenoh router (loopback by default)")
+    p.add_argument("-l", "--listen", action="append", metavar="ENDPOINT", help=f"endpoint to listen on (default {transport.DEFAULT_ENDPOINT})")
+    p.add_argument("-c", "--config", metavar="FILE", help="Zenoh JSON5 configuration file")
+    p.add_argument("--cfg", action="append", metavar="KEY:VALUE", help="a Zenoh config setting, JSON5 value, applied last (repeatable)")
+    p.set_defaults(func=_run_router)

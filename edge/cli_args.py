@@ -4,10 +4,16 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
+from typing import TYPE_CHECKING
 
 from superbody.edge.clock import WorldClock
+from superbody.edge.transport import DEFAULT_ENDPOINT, session_config
 
-__all__ = ["positive", "int_in", "add_clock_args", "clock_from_args"]
+if TYPE_CHECKING:
+    import zenoh
+
+__all__ = ["positive", "int_in", "add_clock_args", "clock_from_args", "add_session_args", "config_from_args", "fail"]
 
 
 def positive(text: str) -> float:
@@ -42,3 +48,24 @@ def add_clock_args(parser: argparse.ArgumentParser) -> None:
 
 def clock_from_args(args: argparse.Namespace) -> WorldClock:
     return WorldClock(args.clock_anchor_ns, args.clock_scale)
+
+
+def add_session_args(parser: argparse.ArgumentParser) -> None:
+    """Add the Zenoh examples' session options to a parser."""
+    g = parser.add_argument_group("zenoh session")
+    g.add_argument("--mode", choices=("peer", "client", "router"), default=None, help="Zenoh mode (default: the --config file's, else peer)")
+    g.add_argument("-e", "--connect", action="append", metavar="ENDPOINT", help=f"endpoint to connect to (repeatable; default {DEFAULT_ENDPOINT})")
+    g.add_argument("-l", "--listen", action="append", metavar="ENDPOINT", help="endpoint to listen on (repeatable)")
+    g.add_argument("-c", "--config", metavar="FILE", help="Zenoh JSON5 configuration file")
+    g.add_argument("--cfg", action="append", metavar="KEY:VALUE",
+                   help='a Zenoh config setting, JSON5 value, applied last (repeatable), e.g. --cfg transport/link/tx/lease:3000')
+
+
+def config_from_args(args: argparse.Namespace) -> zenoh.Config:
+    return session_config(args.mode, args.connect, args.listen, args.config, getattr(args, "cfg", None))
+
+
+def fail(command: str, message: str) -> int:
+    """Print ``superbody COMMAND: error: MESSAGE`` on stderr; the exit code of a bad argument, 2."""
+    print(f"superbody {command}: error: {message}", file=sys.stderr)
+    return 2

@@ -6,15 +6,12 @@ a config from deploy/zenoh/ (``--config``: TLS, mutual TLS, user/password and an
 
 from __future__ import annotations
 
-import argparse
 import logging
-import signal
-import sys
 import threading
 
 from superbody.edge import transport
 
-__all__ = ["run_router", "register"]
+__all__ = ["run_router"]
 
 log = logging.getLogger("superbody.router")
 
@@ -30,21 +27,3 @@ def run_router(listen: list[str], stop: threading.Event, config_file: str | None
         stop.wait()
 
 
-def _run(args: argparse.Namespace) -> int:
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
-    try:
-        run_router(args.listen or ([] if args.config else [transport.DEFAULT_ENDPOINT]), stop, args.config, args.cfg)
-    except transport.ConfigError as e:
-        print(f"superbody router: error: {e}", file=sys.stderr)
-        return 2
-    return 0
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("router", help="run a Zenoh router (loopback by default)")
-    p.add_argument("-l", "--listen", action="append", metavar="ENDPOINT", help=f"endpoint to listen on (default {transport.DEFAULT_ENDPOINT})")
-    p.add_argument("-c", "--config", metavar="FILE", help="Zenoh JSON5 configuration file")
-    p.add_argument("--cfg", action="append", metavar="KEY:VALUE", help="a Zenoh config setting, JSON5 value, applied last (repeatable)")
-    p.set_defaults(func=_run)

@@ -33,7 +33,6 @@ Keys (everything under ``superbody/<site>/``):
 
 from __future__ import annotations
 
-import argparse
 import json
 import re
 from typing import TYPE_CHECKING, Literal
@@ -44,9 +43,7 @@ if TYPE_CHECKING:
 __all__ = [
     "DEFAULT_ENDPOINT",
     "Mode",
-    "add_session_args",
     "session_config",
-    "config_from_args",
     "observation_key",
     "camera_alive_key",
     "people_key",
@@ -222,16 +219,3 @@ def session_config(
     return conf
 
 
-def add_session_args(parser: argparse.ArgumentParser) -> None:
-    """Add the Zenoh examples' session options to a parser."""
-    g = parser.add_argument_group("zenoh session")
-    g.add_argument("--mode", choices=("peer", "client", "router"), default=None, help="Zenoh mode (default: the --config file's, else peer)")
-    g.add_argument("-e", "--connect", action="append", metavar="ENDPOINT", help=f"endpoint to connect to (repeatable; default {DEFAULT_ENDPOINT})")
-    g.add_argument("-l", "--listen", action="append", metavar="ENDPOINT", help="endpoint to listen on (repeatable)")
-    g.add_argument("-c", "--config", metavar="FILE", help="Zenoh JSON5 configuration file")
-    g.add_argument("--cfg", action="append", metavar="KEY:VALUE",
-                   help='a Zenoh config setting, JSON5 value, applied last (repeatable), e.g. --cfg transport/link/tx/lease:3000')
-
-
-def config_from_args(args: argparse.Namespace) -> "zenoh.Config":
-    return session_config(args.mode, args.connect, args.listen, args.config, getattr(args, "cfg", None))

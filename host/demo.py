@@ -13,8 +13,6 @@ published track follows: identity switches are counted exactly.
 
 from __future__ import annotations
 
-import argparse
-import json
 import logging
 import math
 import os
@@ -33,15 +31,14 @@ from scipy.optimize import linear_sum_assignment
 
 from superbody.edge import transport
 from superbody.edge.angles import wrap_angle
-from superbody.edge.cli_args import int_in, positive
 from superbody.edge.clock import WorldClock
 from superbody.edge.messages import wire
 from superbody.edge.resources import site_path
 from superbody.edge.sim import SimCamera, World
-from superbody.edge.site import SiteError, load_site
+from superbody.edge.site import load_site
 from superbody.host.messages import pose as pose_msg
 
-__all__ = ["DemoConfig", "run_demo", "register", "stop_processes"]
+__all__ = ["DemoConfig", "run_demo", "stop_processes"]
 
 log = logging.getLogger("superbody.demo")
 
@@ -314,61 +311,3 @@ def stop_processes(procs: Iterable[subprocess.Popen], timeout_s: float = 10.0) -
             p.wait()
 
 
-def _print_summary(s: dict) -> None:
-    print("\nsuperbody demo summary")
-    print(f"  people simulated / confirmed: {s['people_simulated']} / {s['people_confirmed']}  (tracks published: {s['tracks']})")
-    print(f"  identity switches:            {s['id_switches']}")
-    pm, ym = s["position_mae_mm"], s["yaw_mae_deg"]
-    print(f"  position MAE vs truth:        {'-' if pm is None else f'{pm:.0f} mm'}")
-    print(f"  yaw MAE vs truth:             {'-' if ym is None else f'{ym:.1f} deg'}")
-    print(f"  host latency p50 / p99:       {s['latency_ms']['p50']:.2f} / {s['latency_ms']['p99']:.2f} ms")
-    print(f"  pose arrays published:        {s['poses_published']}")
-    if s["confirm_delay_s"]:
-        print("  confirmed after appearing:    " + ", ".join(f"person {k}: {v:.1f} s" for k, v in sorted(s["confirm_delay_s"].items())))
-    print(f"  logs:                         {s['log_dir']}")
-
-
-def _run(args: argparse.Namespace) -> int:
-    cfg = DemoConfig(site=args.site, people=args.people, seed=args.seed, duration_s=args.duration, clock_scale=args.clock_scale,
-                     port=args.port, estimator=args.estimator, model=args.model, kill_camera=args.kill_camera,
-                     kill_at_s=args.kill_at, table=not args.no_table)
-    try:
-        site = load_site(cfg.site)
-        if cfg.kill_camera is not None:
-            site.camera(cfg.kill_camera)
-    except (SiteError, KeyError) as e:
-        print(f"superbody demo: error: {e.args[0] if e.args else e}", file=sys.stderr)
-        return 2
-    stop = threading.Event()
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    try:
-        summary = run_demo(cfg, stop)
-    except RuntimeError as e:
-        print(f"superbody demo: error: {e}", file=sys.stderr)
-        return 1
-    _print_summary(summary)
-    if args.json_summary:
-        keys = ("people_simulated", "people_confirmed", "tracks", "confirm_delay_s", "id_switches", "position_mae_mm", "yaw_mae_deg",
-                "latency_ms", "poses_published")
-        Path(args.json_summary).write_text(json.dumps({k: summary[k] for k in keys}, indent=1) + "\n")
-    return 0
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("demo", help="run the whole system on simulated cameras and people, with a live table")
-    p.add_argument("--site", default=str(DEFAULT_SITE), help="site file (default: the paper's apartment)")
-    p.add_argument("--people", type=int_in(1, 10, "--people"), default=3, help="simulated people (default 3)")
-    p.add_argument("--seed", type=int, default=7, help="simulator seed (default 7)")
-    p.add_argument("--duration", type=positive, default=None, help="stop after this many simulated seconds (default: Ctrl-C)")
-    p.add_argument("--clock-scale", type=positive, default=1.0, help="simulated seconds per wall second (default 1)")
-    p.add_argument("--port", type=int_in(0, 65535, "--port"), default=DEMO_PORT,
-                   help=f"loopback port of the demo's Zenoh router (default {DEMO_PORT}, not zenohd's 7447; 0: any free port)")
-    p.add_argument("--estimator", choices=("auto", "hybrid", "onnx", "analytic"), default="auto",
-                   help="pose estimator (default auto: the shipped fp32 model, fused with geometry when it carries a hybrid calibration)")
-    p.add_argument("--model", help="ONNX model (default: models/<site>.fp32.onnx)")
-    p.add_argument("--kill-camera", metavar="ID", help="kill this camera's process mid-run (fault injection)")
-    p.add_argument("--kill-at", type=positive, default=10.0, help="simulated second at which to kill it (default 10)")
-    p.add_argument("--no-table", action="store_true", help="no live table, only the summary")
-    p.add_argument("--json-summary", metavar="F", help="write the summary as JSON")
-    p.set_defaults(func=_run)

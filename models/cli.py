@@ -12,10 +12,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import tomllib
 from pathlib import Path
 
+from superbody.edge.cli_args import fail as _fail
 from superbody.edge.resources import site_path
 
 __all__ = ["register"]
@@ -23,24 +23,12 @@ __all__ = ["register"]
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the offline commands (``calibrate``, ``train``, ``eval``, ...)."""
+    from superbody.models.evaluation import cli as evaluation_cli
+    from superbody.models.training import cli as training_cli  # light: torch is imported only when a run starts
+
     _add_calibrate(sub)
-    _add_train(sub)
-    _add_eval(sub)
-
-
-def _add_train(sub: argparse._SubParsersAction) -> None:
-    from superbody.models.evaluation import coverage, crossval
-    from superbody.models.training import ensemble, train  # light: torch is imported only when a run starts
-
-    train.register(sub)
-    ensemble.register(sub)
-    crossval.register(sub)
-    coverage.register(sub)
-
-
-def _fail(command: str, message: str) -> int:
-    print(f"superbody {command}: error: {message}", file=sys.stderr)
-    return 2
+    training_cli.register(sub)
+    evaluation_cli.register(sub)
 
 
 # --- calibrate ----------------------------------------------------------------------------------
@@ -268,218 +256,3 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
     return 0
 
 
-# --- calibrate oak-intrinsics -------------------------------------------------------------------
-
-
-# --- eval ---------------------------------------------------------------------------------------
-
-_DEFAULT_SITE = "wtf-apartment"  # a shipped site (edge/resources.py)
-_BASELINE = "analytic"
-# The truth offset is a physical distance on a person: anything beyond a metre is a typo.
-_MAX_TRUTH_OFFSET_M = 1.0
-_EVAL_ESTIMATORS = ("onnx", "analytic")  # onnx: each --model as the host runs it (hybrid when it carries a calibration)
-_TEMPORAL_AT = ("first", "last")  # models.evaluation.temporal.SCORE_AT, without importing it for --help
-
-
-def _add_eval(sub: argparse._SubParsersAction) -> None:
-    from superbody.models.data.wtf import TRUTH_OFFSET_M  # numpy only
-
-    p = sub.add_parser(
-        "eval",
-        help="score models and the analytic baseline on a WheresTheFellow file",
-        description=(
-            "Run one or more ONNX models and the analytic baseline on every sample of a WheresTheFellow "
-            "JSON file and print the paper's metrics (MSE in the original code's units) and the MAE of x, y "
-            "and yaw, overall and by number of cameras. Predictions (torso centres) are moved forward by "
-            "--truth-offset to the dataset's chest-worn tracker before scoring."
-        ),
-    )
-    p.add_argument("--dataset", type=Path, required=True, metavar="PATH.json", help="WheresTheFellow JSON file (e.g. dev.json)")
-    p.add_argument(
-        "--model", type=Path, action="append", metavar="M.onnx",
-        help="ONNX model; repeat to compare several (the first is the one --json-out and --predictions-out report)",
-    )
-    p.add_argument("--estimator", choices=_EVAL_ESTIMATORS, default="onnx",
-                   help="onnx: score --model (required); analytic: score the analytic baseline alone, without --model (default: %(default)s)")
-    p.add_argument(
-        "--temporal", action="store_true",
-        help=("also replay the recording in capture-time order through the host's own aggregator (tracker, estimator, "
-              "filter) and score the pose it publishes at each sample's time, beside the per-frame figures; "
-              "--predictions-out then writes these poses"),
-    )
-    p.add_argument("--temporal-at", choices=_TEMPORAL_AT, default="first",
-                   help="with --temporal, score each sample when its first view (its time) or its last view is in (default: %(default)s)")
-    p.add_argument(
-        "--latency-scan", action="store_true",
-        help=("also score each estimator's per-frame poses against the truth taken L ms before the views' mean capture time, "
-              "L from -100 to 400 ms: the lag that fits best is how much older the images are than their stamps, on the "
-              "truth's clock (each view carries its own truth)"),
-    )
-    p.add_argument("--site", type=Path, default=site_path(_DEFAULT_SITE), metavar="SITE.toml", help=f"site file (default: the shipped {_DEFAULT_SITE})")
-    p.add_argument("--json-out", type=Path, metavar="F", help="write the first model's metrics, the baseline's and the per-camera breakdown as JSON")
-    p.add_argument("--predictions-out", type=Path, metavar="F.csv",
-                   help="write the first model's predictions in the dataset's frame: index,timestamp_ms,x_mm,z_mm,angle_rad")
-    p.add_argument("--plots", type=Path, metavar="DIR", help="write PNG plots here (needs matplotlib)")
-    p.add_argument(
-        "--truth-offset", type=float, default=TRUTH_OFFSET_M, metavar="M",
-        help="metres the dataset's truth lies in front of the torso centre (default: %(default)s; 0 scores torso against tracker)",
-    )
-    p.add_argument("--batch-size", type=int, default=64, help="samples per estimator call (default: %(default)s)")
-    p.set_defaults(func=_run_eval)
-
-
-def _model_names(paths: list[Path]) -> list[str]:
-    """File names, or the paths as given where two models share a file name."""
-    names = [p.name for p in paths]
-    return [str(p) if names.count(p.name) > 1 else p.name for p in paths]
-
-
-def _run_eval(args: argparse.Namespace) -> int:
-    import math
-
-    from superbody.edge.site import SiteError, load_site
-    from superbody.models.data.wtf import DatasetError, load_wtf_raw, to_samples
-
-    command = "eval"
-    if not (math.isfinite(args.truth_offset) and abs(args.truth_offset) <= _MAX_TRUTH_OFFSET_M):
-        return _fail(command, f"--truth-offset must be metres in [-{_MAX_TRUTH_OFFSET_M:g}, {_MAX_TRUTH_OFFSET_M:g}], got {args.truth_offset}")
-    if args.batch_size < 1:
-        return _fail(command, f"--batch-size must be >= 1, got {args.batch_size}")
-    paths = args.model or []
-    if args.estimator == _BASELINE and paths:
-        return _fail(command, "--model cannot be combined with --estimator analytic (it scores the analytic estimator alone)")
-    if args.estimator == "onnx" and not paths:
-        return _fail(command, "--model M.onnx is required (or --estimator analytic)")
-    names = _model_names(paths) if paths else [_BASELINE]
-    if paths and len(set(names)) < len(names):
-        return _fail(command, f"--model: the same model is given twice: {', '.join(sorted({n for n in names if names.count(n) > 1}))}")
-    if paths and _BASELINE in names:
-        return _fail(command, f"--model {_BASELINE!r}: the name is taken by the baseline; rename the file")
-    if args.plots is not None:
-        import importlib.util
-
-        if importlib.util.find_spec("matplotlib") is None:
-            return _fail(command, "--plots needs matplotlib (pip install 'superbody[train]')")
-    try:
-        site = load_site(args.site)
-        raw = load_wtf_raw(args.dataset)
-        samples = to_samples(raw, site)
-        estimators = {name: _load_model(path, site) for name, path in zip(names, paths)}
-    except (DatasetError, SiteError, ValueError) as e:  # ModelMismatchError is a ValueError
-        return _fail(command, str(e))
-
-    from superbody.host.estimation.analytic import AnalyticEstimator
-    from superbody.host.estimation.hybrid import HybridEstimator
-    from superbody.models.evaluation.evaluate import format_table, json_report, predict, score, write_predictions_csv
-
-    # A hybrid model is also scored as its network alone, to show what the fusion adds.
-    host_names = {}
-    for name, path in zip(names, paths):
-        if isinstance(estimators[name], HybridEstimator):
-            host_names[name] = f"hybrid:{path.name}"
-            estimators[f"{name} (network)"] = estimators[name].net
-            host_names[f"{name} (network)"] = f"onnx:{path.name}"
-        else:
-            host_names[name] = f"onnx:{path.name}"
-    estimators[_BASELINE] = AnalyticEstimator(site)
-    try:
-        predictions = {
-            name: predict(samples, est, args.batch_size, desc=name, progress=None) for name, est in estimators.items()
-        }
-    except ValueError as e:
-        return _fail(command, str(e))
-    reports = score(samples, predictions, args.truth_offset)
-    print(f"{args.dataset}: {len(samples)} samples, site {site.name!r}")
-    temporal = None
-    if args.temporal:
-        try:
-            temporal = _eval_temporal(args, raw, samples, site, estimators, host_names, predictions)
-        except ValueError as e:
-            return _fail(command, str(e))
-    else:
-        print(format_table(reports, args.truth_offset))
-    scans = None
-    if args.latency_scan:
-        from superbody.models.evaluation.temporal import view_stamps
-        from superbody.models.evaluation.temporal_scores import format_latency_scan, latency_scan, truth_track
-
-        track, stamps = truth_track(raw), view_stamps(raw)
-        scans = {name: latency_scan(pred, stamps, track, args.truth_offset) for name, pred in predictions.items()}
-        for name, scan in scans.items():
-            print(format_latency_scan(name, scan))
-    try:
-        if args.json_out is not None:
-            shown = names + [n for n in estimators if n.endswith(" (network)")]
-            doc = json_report(reports, shown, _BASELINE, args.truth_offset)
-            doc["dataset"], doc["site"] = str(args.dataset), str(args.site)
-            if temporal is not None:
-                doc["temporal"] = dict(json_report(temporal[0], shown, _BASELINE, args.truth_offset), at=args.temporal_at,
-                                       replay=temporal[1], signature=_SIGNATURE_NOTE)
-            if scans is not None:
-                doc["latency_scan"] = scans
-            args.json_out.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
-            print(f"wrote {args.json_out}")
-        if args.predictions_out is not None:
-            pred = temporal[2][names[0]] if temporal is not None else predictions[names[0]]
-            write_predictions_csv(args.predictions_out, samples, pred, args.truth_offset)
-            print(f"wrote {args.predictions_out}")
-        if args.plots is not None:
-            from superbody.models.evaluation.plots import write_plots
-
-            for path in write_plots(args.plots, samples, predictions, args.truth_offset):
-                print(f"wrote {path}")
-    except OSError as e:
-        return _fail(command, f"{e.filename}: {e.strerror or e}")
-    return 0
-
-
-_SIGNATURE_NOTE = "one constant flat hue-saturation histogram on every view (the dataset has no colour)"
-
-
-def _eval_temporal(args, raw, samples, site, estimators: dict, host_names: dict, predictions: dict) -> tuple[dict, dict, dict]:
-    """Replay the recording through the host aggregator per estimator; print per-frame and temporal side by side.
-
-    Returns:
-        ``(temporal reports, replay summaries, temporal poses)``, each keyed by estimator name.
-    """
-    import numpy as np
-
-    from superbody.models.evaluation.evaluate import format_table, score
-    from superbody.models.evaluation.temporal import replay, view_stamps
-    from superbody.models.evaluation.temporal_scores import format_replay, replay_summary
-
-    stamps = view_stamps(raw)
-    truth = np.array([s.truth for s in samples])
-    poses, summaries = {}, {}
-    for name, est in estimators.items():
-        rep = replay(samples, stamps, predictions[name], site, est, host_names.get(name, name), at=args.temporal_at)
-        poses[name] = rep.poses
-        summaries[name] = replay_summary(rep, predictions[name], truth, args.truth_offset)
-    reports = score(samples, {**predictions, **{f"{n} temporal": p for n, p in poses.items()}}, args.truth_offset)
-    table = {}
-    for name in estimators:
-        table[f"{name} per-frame"], table[f"{name} temporal"] = reports[name], reports[f"{name} temporal"]
-    print(f"temporal: replayed in capture-time order through the host aggregator (tracker, estimator, filter; host run's "
-          f"defaults), scored at each sample's {args.temporal_at} view; {_SIGNATURE_NOTE}")
-    print(format_table(table, args.truth_offset))
-    for name in estimators:
-        print(format_replay(name, summaries[name]))
-    return {n: reports[f"{n} temporal"] for n in estimators}, summaries, poses
-
-
-def _load_model(path: Path, site):
-    """The estimator the host would run on this model (``host.estimation.build_estimator``, "auto": the
-    hybrid when the model carries its calibration); ValueError (one line) if the file is missing
-    or unreadable."""
-    from superbody.host.estimation import build_estimator
-    from superbody.host.estimation.estimator import ModelMismatchError
-
-    if not path.is_file():
-        raise ValueError(f"--model {path}: no such file")
-    try:
-        return build_estimator(site, "auto", path)[0]
-    except ModelMismatchError:
-        raise
-    except Exception as e:  # onnxruntime's load errors (InvalidProtobuf, Fail, ...) derive from Exception only
-        detail = str(e).strip().splitlines()[-1] if str(e).strip() else type(e).__name__
-        raise ValueError(f"--model {path}: cannot load the model ({detail})") from None

@@ -125,7 +125,7 @@ class BlazePose:
         self.timeout_s = timeout_s
         if not (os.path.isfile(self.python) and os.access(self.python, os.X_OK)):
             raise DetectorError(f"BlazePose needs its own Python with mediapipe==0.10.21, not found at {self.python}: "
-                                f"run `make blazepose` in the checkout, or set {PYTHON_ENV} (see README)")
+                                f"run `make blazepose` in the checkout, or set {PYTHON_ENV} (see docs/cameras.md)")
         self._log = tempfile.TemporaryFile()
         env = dict(os.environ, GLOG_minloglevel="2", TF_CPP_MIN_LOG_LEVEL="2", PYTHONNOUSERSITE="1")
         env.pop("PYTHONPATH", None)

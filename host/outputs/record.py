@@ -14,23 +14,17 @@ Read it back with the ``mcap`` library (``mcap.reader.make_reader``) or open it 
 
 from __future__ import annotations
 
-import argparse
 import json
 import logging
-import signal
-import sys
 import threading
 import time
 from collections import Counter, deque
 from pathlib import Path
 from typing import BinaryIO
 
-from superbody.edge import transport
-from superbody.edge.cli_args import positive
 from superbody.edge.resources import json_schema, package_version
-from superbody.edge.site import NAME_RE
 
-__all__ = ["Recorder", "message_kind", "record", "register"]
+__all__ = ["Recorder", "message_kind", "record"]
 
 log = logging.getLogger("superbody.record")
 
@@ -136,33 +130,3 @@ def record(conf, out: Path, duration_s: float | None, site: str | None = None, s
     return dict(rec.counts)
 
 
-def _site_name(text: str) -> str:
-    if not NAME_RE.fullmatch(text):
-        raise argparse.ArgumentTypeError(f"must be a site name (1-64 of A-Z a-z 0-9 _ -), got {text!r}")
-    return text
-
-
-def _run(args: argparse.Namespace) -> int:
-    try:
-        conf = transport.config_from_args(args)
-        out = Path(args.out)
-        if not out.parent.is_dir():
-            raise ValueError(f"--out {out}: folder {out.parent} does not exist")
-    except (ValueError, OSError) as e:
-        print(f"superbody record: error: {e}", file=sys.stderr)
-        return 2
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
-    counts = record(conf, out, args.duration, args.site, stop)
-    print(f"superbody record: wrote {out}: " + (", ".join(f"{k} {v}" for k, v in sorted(counts.items())) or "no messages"))
-    return 0
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("record", help="record a site's observations, poses and status into an MCAP file")
-    p.add_argument("--out", required=True, metavar="F.mcap", help="MCAP file to write")
-    p.add_argument("--duration", type=positive, default=None, help="stop after this many seconds (default: Ctrl-C)")
-    p.add_argument("--site", type=_site_name, default=None, help="record only this site (its name; default: every site)")
-    transport.add_session_args(p)
-    p.set_defaults(func=_run)

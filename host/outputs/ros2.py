@@ -20,7 +20,6 @@ source, and what could not be, is in ``docs/ros2.md``.
 
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import re
@@ -46,8 +45,6 @@ __all__ = [
     "liveliness_keys",
     "attachment",
     "pose_array_cdr",
-    "add_args",
-    "open_from_args",
     "Ros2Sink",
 ]
 
@@ -207,33 +204,6 @@ class Ros2Publisher:
             t.undeclare()
 
 
-def _domain(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        n = -1
-    if not 0 <= n <= _MAX_DOMAIN:
-        raise argparse.ArgumentTypeError(f"--ros2-domain must be an integer in [0, {_MAX_DOMAIN}], got {text!r}")
-    return n
-
-
-def _topic(text: str) -> str:
-    try:
-        return check_topic(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(str(e)) from None
-
-
-def add_args(parser: argparse.ArgumentParser) -> None:
-    """``--ros2``, ``--ros2-topic``, ``--ros2-domain`` for ``host run``."""
-    g = parser.add_argument_group("ROS 2 (rmw_zenoh)")
-    g.add_argument("--ros2", action="store_true", help="also publish the poses as geometry_msgs/msg/PoseArray for ROS 2 nodes on rmw_zenoh")
-    g.add_argument("--ros2-topic", type=_topic, default=Ros2Config.topic, help="ROS 2 topic (default %(default)s)")
-    env = os.environ.get("ROS_DOMAIN_ID", "")
-    default = int(env) if env.isdigit() and int(env) <= _MAX_DOMAIN else 0
-    g.add_argument("--ros2-domain", type=_domain, default=default, help="ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID, else 0)")
-
-
 class Ros2Sink:
     """The host's ``--ros2`` output (a ``Sink``, host/outputs/): a ``Ros2Publisher`` on a session of
     its own; closing it closes both."""
@@ -249,20 +219,3 @@ class Ros2Sink:
         self.session.close()
 
 
-def open_from_args(args: argparse.Namespace) -> Ros2Sink:
-    """The ``Ros2Sink`` of ``host run --ros2``: its own Zenoh session with the host's mode,
-    endpoints and config file, listening nowhere (the host's session keeps its listeners)."""
-    import zenoh
-
-    from superbody.edge import transport
-
-    config = Ros2Config(topic=args.ros2_topic, domain_id=args.ros2_domain)
-    _typestore()  # rosbags present (ImportError) before any session is opened
-    conf = transport.session_config("peer" if args.mode == "router" else args.mode, args.connect or args.listen, [], args.config,
-                                    getattr(args, "cfg", None))
-    session = zenoh.open(conf)
-    try:
-        return Ros2Sink(session, Ros2Publisher(session, config))
-    except BaseException:
-        session.close()
-        raise

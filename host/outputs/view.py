@@ -16,12 +16,9 @@ The scene's frame is the site's world frame, named after the site (REP-103: metr
 
 from __future__ import annotations
 
-import argparse
 import json
 import logging
 import math
-import signal
-import sys
 import threading
 import time
 
@@ -30,11 +27,11 @@ from numpy.typing import NDArray
 
 from superbody.edge import transport
 from superbody.edge.camera import Camera, pixel_to_ray
-from superbody.edge.resources import json_schema, site_path
-from superbody.edge.site import Site, SiteError, load_site
+from superbody.edge.resources import json_schema
+from superbody.edge.site import Site
 from superbody.host.messages import pose as pose_msg
 
-__all__ = ["SCENE_TOPIC", "frustum_points", "floor_points", "static_scene", "people_scene", "run_view", "register"]
+__all__ = ["SCENE_TOPIC", "frustum_points", "floor_points", "static_scene", "people_scene", "run_view"]
 
 log = logging.getLogger("superbody.view")
 
@@ -181,43 +178,3 @@ def run_view(conf, site: Site, host: str, port: int, stop: threading.Event, read
     return counts
 
 
-def _port(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        n = -1
-    if not 0 <= n <= 65535:
-        raise argparse.ArgumentTypeError(f"--ws-port must be an integer in [0, 65535], got {text!r}")
-    return n
-
-
-def _run(args: argparse.Namespace) -> int:
-    try:
-        site = load_site(args.site)
-        conf = transport.config_from_args(args)
-        import foxglove  # noqa: F401  (the `view` extra)
-    except ImportError:
-        print("superbody view: error: needs the foxglove-sdk package: pip install 'superbody[view]'", file=sys.stderr)
-        return 2
-    except (SiteError, ValueError) as e:
-        print(f"superbody view: error: {e}", file=sys.stderr)
-        return 2
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
-    try:
-        counts = run_view(conf, site, args.ws_host, args.ws_port, stop)
-    except RuntimeError as e:  # e.g. the port is taken
-        print(f"superbody view: error: cannot serve on {args.ws_host}:{args.ws_port} ({e})", file=sys.stderr)
-        return 1
-    log.info("view stopped: %s", counts)
-    return 0
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("view", help="live 3D view of a site in Foxglove (floor, cameras, people as arrows)")
-    p.add_argument("--site", default=str(site_path()), help="site file (default: the shipped wtf-apartment, the demo's)")
-    p.add_argument("--ws-port", type=_port, default=8765, help="Foxglove WebSocket port (default 8765, Foxglove's default; 0: any free port)")
-    p.add_argument("--ws-host", default="127.0.0.1", help="address to serve on (default 127.0.0.1; 0.0.0.0 for other machines)")
-    transport.add_session_args(p)
-    p.set_defaults(func=_run)

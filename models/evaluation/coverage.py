@@ -16,9 +16,6 @@ and, with ``--json-out``, the per-cell and per-camera-count figures.
 
 from __future__ import annotations
 
-import argparse
-import json
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -26,10 +23,9 @@ from numpy.typing import NDArray
 
 from superbody.edge.angles import wrap_angle
 from superbody.edge.floor import point_in_polygon, views_at
-from superbody.edge.resources import site_path
 from superbody.edge.site import Site
 
-__all__ = ["cell_errors", "coverage_figures", "register"]
+__all__ = ["cell_errors", "coverage_figures"]
 
 CELL_M = 0.5
 
@@ -119,69 +115,3 @@ def coverage_figures(site: Site, train_truth: NDArray, test_truth: NDArray, test
     return [p1, p2], cells
 
 
-def _run(args: argparse.Namespace) -> int:
-    from superbody.edge.site import SiteError, load_site
-    from superbody.host.estimation import build_estimator
-    from superbody.models.data.simdata import SimDataConfig, generate
-    from superbody.models.evaluation.evaluate import predict
-
-    try:
-        site = load_site(args.site)
-        if args.model and not Path(args.model).is_file():
-            raise ValueError(f"--model {args.model}: no such file")
-        est, name = build_estimator(site, "auto", args.model)
-        for flag, v, lo, hi in (("--train-samples", args.train_samples, 100, 1_000_000), ("--test-samples", args.test_samples, 100, 1_000_000)):
-            if not lo <= v <= hi:
-                raise ValueError(f"{flag} must be in [{lo}, {hi}], got {v}")
-        real_xy = None
-        if args.dataset:
-            from superbody.models.data.wtf import load_wtf, truth_to_torso
-
-            real_xy = truth_to_torso(np.array([s.truth for s in load_wtf(args.dataset, site)]))[:, :2]
-    except (SiteError, ValueError) as e:
-        print(f"superbody coverage: error: {e}", file=sys.stderr)
-        return 2
-    progress = sys.stderr.isatty()
-    train = generate(site, SimDataConfig(samples=args.train_samples, seed=args.train_seed), progress=progress)
-    test = generate(site, SimDataConfig(samples=args.test_samples, seed=args.test_seed), progress=progress)
-    train_truth = np.array([s.truth for s in train])
-    test_truth = np.array([s.truth for s in test])
-    pred = predict(test, est, 256, desc=name, progress=None)
-    paths, cells = coverage_figures(site, train_truth, test_truth, pred, Path(args.out), real_xy)
-    for p in paths:
-        print(f"wrote {p}")
-    cams = np.array([len(s.views) for s in test])
-    pos = np.linalg.norm(pred[:, :2] - test_truth[:, :2], axis=1) * 1000
-    yaw = np.degrees(np.abs(wrap_angle(pred[:, 2] - test_truth[:, 2])))
-    ok = np.isfinite(pos)
-    by = {str(k): {"samples": int((ok & (cams == k)).sum()), "position_mm": float(np.mean(pos[ok & (cams == k)])),
-                   "yaw_deg": float(np.mean(yaw[ok & (cams == k)]))} for k in np.unique(cams)}
-    inside = point_in_polygon(train_truth[:, :2], site.floor).mean()
-    print(f"{name} on {len(test)} simulated samples: position {np.mean(pos[ok]):.0f} mm, yaw {np.mean(yaw[ok]):.1f} deg; "
-          + "; ".join(f"{k} cam: {v['position_mm']:.0f} mm, {v['yaw_deg']:.1f} deg" for k, v in by.items()))
-    p = cells["position_mm"]
-    print(f"cells: {int(np.isfinite(p).sum())} of 0.5 m with >= 5 samples; worst cell position {np.nanmax(p):.0f} mm, median {np.nanmedian(p):.0f} mm")
-    if args.json_out:
-        doc = {"estimator": name, "train_samples": len(train), "train_inside_floor": float(inside), "test_samples": len(test),
-               "position_mm": float(np.mean(pos[ok])), "yaw_deg": float(np.mean(yaw[ok])), "by_cameras": by,
-               "cells": {"x_edges": cells["x_edges"].tolist(), "y_edges": cells["y_edges"].tolist(),
-                         "position_mm": np.where(np.isfinite(p), np.round(p, 1), None).tolist(),
-                         "yaw_deg": np.where(np.isfinite(cells["yaw_deg"]), np.round(cells["yaw_deg"], 2), None).tolist(),
-                         "count": cells["count"].astype(int).tolist()},
-               "images": [str(x) for x in paths]}
-        Path(args.json_out).write_text(json.dumps(doc, indent=1) + "\n")
-    return 0
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("coverage", help="maps of where a model was trained and of its simulated error across the floor (PNG)")
-    p.add_argument("--site", default=str(site_path("wtf-apartment")), help="site file (default: the shipped wtf-apartment)")
-    p.add_argument("--model", help="ONNX model (default: the site's shipped one)")
-    p.add_argument("--out", required=True, help="folder for coverage.png and error-by-cell.png")
-    p.add_argument("--dataset", help="a WheresTheFellow file whose path to draw (e.g. dev.json)")
-    p.add_argument("--train-samples", type=int, default=10_000, help="training positions to show (the training set's first N)")
-    p.add_argument("--train-seed", type=int, default=0, help="the training run's --sim-seed (default 0)")
-    p.add_argument("--test-samples", type=int, default=6_000, help="simulated test samples")
-    p.add_argument("--test-seed", type=int, default=12_345, help="seed of the simulated test set (not a training seed)")
-    p.add_argument("--json-out", help="write the figures as JSON")
-    p.set_defaults(func=_run)

@@ -15,7 +15,7 @@ For each fold a model is trained on the simulated data plus the real samples of 
 the held-out fold. The held-out predictions of all folds together are scored like ``superbody
 eval`` (every real sample is predicted by a model that never saw it), with the analytic baseline
 beside them. ``--predictions-out F.npz`` keeps them (pose, predicted sigma, analytic pose, truth,
-camera count, fold) for calibrating the hybrid estimator (``superbody calibrate-hybrid``).
+camera count, fold) for calibrating the hybrid estimator (``superbody calibrate hybrid``).
 
 ``--temporal`` also gives the live system's figures on the cross-validation: each fold's model
 is exported as ``superbody train`` writes it, given the hybrid calibration fitted on the other
@@ -32,22 +32,19 @@ set S) can be scored live on the cross-validation again without retraining
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
-import json
 import logging
 import shutil
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
-from superbody.edge.site import SiteError, load_site
-from superbody.models.training.train import TrainConfig, add_train_args, config_from_args, train
+from superbody.edge.site import load_site
+from superbody.models.training.train import TrainConfig, train
 
-__all__ = ["fold_ranges", "spatial_folds", "crossvalidate", "register", "SPLITS"]
+__all__ = ["fold_ranges", "spatial_folds", "crossvalidate", "SPLITS"]
 
 SPLITS = ("time", "space")
 
@@ -223,53 +220,3 @@ class _TorchEstimator:
         return self.model.decode(out, self.site), decode_std(out, self.model.scale)
 
 
-def _run(args: argparse.Namespace) -> int:
-    from superbody.models.evaluation.evaluate import format_table
-
-    try:
-        cfg = config_from_args(args)
-        load_site(cfg.site)
-        if not cfg.real or not Path(cfg.real).is_file():
-            raise ValueError(f"--real {cfg.real}: no such file (cross-validation needs the real data)")
-        if cfg.init and not Path(cfg.init).is_file():
-            raise ValueError(f"--init {cfg.init}: no such file")
-        if not 0.0 <= args.buffer <= 5.0:
-            raise ValueError(f"--buffer must be in [0, 5] metres, got {args.buffer}")
-        if args.models_out is not None and not args.temporal:
-            raise ValueError("--models-out needs --temporal (the fold models are kept with their live calibration)")
-    except (ValueError, SiteError) as e:
-        print(f"superbody crossval: error: {e}", file=sys.stderr)
-        return 2
-    out = crossvalidate(cfg, args.folds, args.truth_offset, progress=sys.stderr.isatty() and not args.no_progress,
-                        split=args.split, buffer_m=args.buffer, int8=args.int8, temporal=args.temporal,
-                        models_out=args.models_out)
-    print(f"blocked {args.folds}-fold cross-validation ({args.split} blocks) on {cfg.real} ({cfg.arch}, {cfg.variant}{', 3D' if cfg.use_3d else ''}):")
-    print(format_table(out["reports"], out["truth_offset_m"]))
-    if args.json_out:
-        doc = {"config": cfg.to_json(), "split": args.split, "folds": out["folds"], "truth_offset_m": out["truth_offset_m"], **out["reports"]}
-        Path(args.json_out).write_text(json.dumps(doc, indent=1) + "\n")
-    if args.predictions_out:
-        keys = (("predictions", "std", "analytic", "truth", "views", "fold") + (("predictions_int8", "std_int8") if args.int8 else ())
-                + (("hybrid", "temporal_network", "temporal_hybrid", "temporal_analytic") if args.temporal else ()))
-        np.savez(args.predictions_out, **{k: out[k] for k in keys},
-                 truth_offset_m=out["truth_offset_m"], split=args.split)
-    return 0
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("crossval", help="blocked k-fold cross-validation of sim + real training on a WheresTheFellow file")
-    add_train_args(p)
-    p.add_argument("--folds", type=int, default=5, help="folds (default 5)")
-    p.add_argument("--split", choices=SPLITS, default="time", help="block the file by time segments or by floor regions (default time)")
-    p.add_argument("--buffer", type=float, default=0.3, help="--split space: also keep samples this close (m) to the held-out region out of training")
-    p.add_argument("--int8", action="store_true",
-                   help="also quantise each fold's model to int8 as train writes it and score its held-out predictions (kept in --predictions-out)")
-    p.add_argument("--temporal", action="store_true",
-                   help="also the live system's figures: each fold's model, calibrated as a hybrid on the other folds, "
-                        "replayed through the host's aggregator as eval --temporal does (network, hybrid and geometry)")
-    p.add_argument("--predictions-out", help="write the held-out predictions, sigmas, analytic poses and truth (.npz)")
-    p.add_argument("--models-out", type=Path, metavar="DIR",
-                   help="with --temporal: keep each fold's fp32 model, hybrid-calibrated on the other folds, as DIR/fold<k>.fp32.onnx")
-    p.add_argument("--truth-offset", type=float, default=None, help="chest-tracker offset of the file's truth, metres (default: the dataset's)")
-    p.add_argument("--json-out", help="write the reports as JSON")
-    p.set_defaults(func=_run)

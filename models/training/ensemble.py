@@ -19,15 +19,13 @@ cos: yaw = atan2; pose_std (B, 3)), so the host runs an ensemble like any model.
 
 from __future__ import annotations
 
-import argparse
 import pickle
-import sys
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["combine", "load_member", "calibration_graphs", "register"]
+__all__ = ["combine", "load_member", "calibration_graphs"]
 
 _EPS = 1e-9
 
@@ -103,48 +101,3 @@ def calibration_graphs(site, spec, samples: int = 512, seed: int = 0) -> list:
     return [build_batch(views[i : i + 128], site, spec) for i in range(0, len(views), 128)]
 
 
-def _run(args: argparse.Namespace) -> int:
-    from superbody.models.training.export import export_onnx, quantize_int8
-
-    command = "superbody ensemble"
-    if len(args.member) < 2:
-        print(f"{command}: error: --member must be given at least twice (an ensemble of one is the model itself)", file=sys.stderr)
-        return 2
-    try:
-        members = [load_member(p) for p in args.member]
-    except ValueError as e:
-        print(f"{command}: error: --member {e}", file=sys.stderr)
-        return 2
-    spec, site = members[0][1], members[0][2]
-    for p, (_, s, _, cfg) in zip(args.member, members):
-        if s != spec or cfg["site"] != members[0][3]["site"]:
-            print(f"{command}: error: --member {p} was trained for another site or graph than {args.member[0]}", file=sys.stderr)
-            return 2
-    config = {"ensemble": [{"checkpoint": str(p), **cfg} for p, (_, _, _, cfg) in zip(args.member, members)]}
-    out = Path(args.out)
-    fp32 = out / f"{args.name}.fp32.onnx"
-    try:
-        export_onnx([m[0] for m in members], spec, config, fp32)
-    except ValueError as e:
-        print(f"{command}: error: {e}", file=sys.stderr)
-        return 2
-    paths = [fp32]
-    if not args.no_int8:
-        paths.append(quantize_int8(fp32, out / f"{args.name}.int8.onnx", calibration_graphs(site, spec)))
-    print(f"an ensemble of {len(members)} {members[0][0].arch} networks for site {site.name!r}:")
-    for p in paths:
-        print(f"  {p} ({p.stat().st_size / 1e6:.2f} MB)")
-    return 0
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "ensemble", help="combine trained networks into one ONNX model (fp32 + int8)",
-        description="Export networks trained alike (superbody train checkpoints, .pt) as one ONNX model that combines their "
-                    "estimates (models/training/ensemble.py): mean position, circular-mean yaw, the sigma of their mixture.",
-    )
-    p.add_argument("--member", action="append", default=[], metavar="M.pt", help="a member's checkpoint (repeat: at least two)")
-    p.add_argument("--out", default="build/models", help="output folder (default build/models)")
-    p.add_argument("--name", default="ensemble", help="file name stem (default ensemble)")
-    p.add_argument("--no-int8", action="store_true", help="skip int8 quantisation")
-    p.set_defaults(func=_run)

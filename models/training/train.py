@@ -21,13 +21,11 @@ epoch by validation loss is kept (early stopping with ``patience``); training al
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import itertools
 import json
 import logging
 import math
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,11 +35,11 @@ from numpy.typing import NDArray
 from tqdm import tqdm
 
 from superbody.edge.angles import wrap_angle
-from superbody.edge.site import Site, SiteError, load_site
+from superbody.edge.site import Site, load_site
 from superbody.host.estimation.graph import GraphBatch, GraphSpec, adjacency_template, build_batch, floor_centre, masked_adjacency
 from superbody.models.data.samples import Sample
 
-__all__ = ["TrainConfig", "TrainResult", "train", "prepare", "view_subsets", "register"]
+__all__ = ["TrainConfig", "TrainResult", "train", "prepare", "view_subsets"]
 
 log = logging.getLogger("superbody.train")
 
@@ -325,53 +323,6 @@ def save(result: TrainResult, cfg: TrainConfig, out_dir: str | Path, name: str, 
 # -- command line ---------------------------------------------------------------------------------
 
 
-def _range(text: str) -> tuple[int, int]:
-    try:
-        a, b = (int(v) for v in text.split(":"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--real-exclude must be START:END sample indices, got {text!r}") from None
-    if not 0 <= a < b:
-        raise argparse.ArgumentTypeError(f"--real-exclude needs 0 <= START < END, got {text!r}")
-    return a, b
-
-
-def add_train_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--site", required=True, help="site file (TOML)")
-    p.add_argument("--arch", default="gat", choices=sorted(ARCH_DEFAULTS), help="network (default gat)")
-    p.add_argument("--variant", default="site", choices=("site", "rays"), help="features: site cameras one-hot, or world rays (site-independent)")
-    p.add_argument("--3d", dest="use_3d", action="store_true", help="add the joints' 3D positions (depth cameras)")
-    p.add_argument("--max-views", type=int, default=4, help="rays variant: view slots per person (default 4)")
-    p.add_argument("--geometry", action="store_true", help="add each joint's single-view floor position (beyond the paper)")
-    p.add_argument("--hparams", type=json.loads, default={}, help='architecture hyper-parameters as JSON, e.g. \'{"hidden": 64}\'')
-    p.add_argument("--sim-samples", type=int, default=30_000, help="simulated samples (default 30000)")
-    p.add_argument("--sim-seed", type=int, default=0, help="simulation seed")
-    p.add_argument("--random-sites", type=int, default=0, help="rays variant: simulate in this many random rooms instead of the site")
-    p.add_argument("--real", help="a WheresTheFellow JSON file to mix in (DS1-like)")
-    p.add_argument("--real-exclude", type=_range, help="hold out real samples START:END")
-    p.add_argument("--real-repeat", type=int, default=20, help="times each real sample is seen per epoch (default 20)")
-    p.add_argument("--real-subset-repeat", type=int, default=0,
-                   help="also train on every proper subset of each real sample's views, this many times per epoch (default 0: off)")
-    p.add_argument("--epochs", type=int, default=40)
-    p.add_argument("--batch-size", type=int, default=128)
-    p.add_argument("--lr", type=float, default=2e-3)
-    p.add_argument("--patience", type=int, default=6, help="early stopping patience, epochs")
-    p.add_argument("--yaw-weight", type=float, default=1.0, help="weight of the yaw (sin, cos) error against the position error (default 1)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--max-minutes", type=float, default=15.0, help="stop training after this long (default 15)")
-    p.add_argument("--threads", type=int, default=2, help="torch threads (default 2)")
-    p.add_argument("--init", help="start from this checkpoint (.pt): fine-tuning")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
-
-
-def config_from_args(args: argparse.Namespace) -> TrainConfig:
-    return TrainConfig(
-        site=args.site, arch=args.arch, variant=args.variant, use_3d=args.use_3d, max_views=args.max_views, geometry=args.geometry, hparams=args.hparams,
-        sim_samples=args.sim_samples, sim_seed=args.sim_seed, random_sites=args.random_sites, real=args.real,
-        real_exclude=args.real_exclude, real_repeat=args.real_repeat, real_subset_repeat=args.real_subset_repeat, epochs=args.epochs, batch_size=args.batch_size,
-        lr=args.lr, patience=args.patience, yaw_weight=args.yaw_weight, seed=args.seed, max_minutes=args.max_minutes, threads=args.threads, init=args.init,
-    )
-
-
 def _search(cfg: TrainConfig, n: int, progress: bool) -> TrainConfig:
     """The paper's small random hyper-parameter search: ``n`` short runs, keep the best by validation loss."""
     rng = np.random.default_rng(cfg.seed + 1)
@@ -395,35 +346,3 @@ def _search(cfg: TrainConfig, n: int, progress: bool) -> TrainConfig:
     return dataclasses.replace(cfg, hparams=hp, lr=lr)
 
 
-def _run(args: argparse.Namespace) -> int:
-    try:
-        cfg = config_from_args(args)
-        load_site(cfg.site)
-        if cfg.real and not Path(cfg.real).is_file():
-            raise ValueError(f"--real {cfg.real}: no such file")
-        if cfg.init and not Path(cfg.init).is_file():
-            raise ValueError(f"--init {cfg.init}: no such file")
-    except (ValueError, SiteError) as e:
-        print(f"superbody train: error: {e}", file=sys.stderr)
-        return 2
-    progress = sys.stderr.isatty() and not args.no_progress
-    if args.search:
-        cfg = _search(cfg, args.search, progress)
-    result = train(cfg, progress=progress)
-    paths = save(result, cfg, args.out, args.name, quantize=not args.no_int8)
-    print(f"trained {cfg.arch} ({cfg.variant}{', 3D' if cfg.use_3d else ''}) in {result.minutes:.1f} min, best epoch {result.best_epoch}: "
-          f"validation MAE x {1000 * result.val.get('mae_x_m', math.nan):.0f} mm, y {1000 * result.val.get('mae_y_m', math.nan):.0f} mm, "
-          f"yaw {result.val.get('yaw_mae_deg', math.nan):.1f} deg")
-    for kind, p in paths.items():
-        print(f"  {kind}: {p} ({p.stat().st_size / 1e6:.2f} MB)")
-    return 0
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("train", help="train a pose network from a site (simulation) and optional real data; export ONNX fp32 + int8")
-    add_train_args(p)
-    p.add_argument("--search", type=int, default=0, help="random hyper-parameter search: this many short trials first")
-    p.add_argument("--out", default="build/models", help="output folder (default build/models)")
-    p.add_argument("--name", default="model", help="file name stem (default model)")
-    p.add_argument("--no-int8", action="store_true", help="skip int8 quantisation")
-    p.set_defaults(func=_run)

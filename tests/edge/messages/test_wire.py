@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import pickle
 import re
-from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np

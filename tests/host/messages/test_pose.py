@@ -7,7 +7,6 @@ import json
 import math
 import pickle
 import re
-from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
