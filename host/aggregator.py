@@ -27,6 +27,7 @@ from superbody.edge.site import Site
 from superbody.host.estimation.estimator import Estimator, estimate_detailed
 from superbody.host.filtering.pose_filter import FilterConfig, PoseFilter, predict_many, update_many
 from superbody.host.messages import pose as pose_msg
+from superbody.host.messages.pose_rules import MAX_SPEED
 from superbody.host.tracking.config import TrackerConfig
 from superbody.host.tracking.tracker import Tracker
 
@@ -212,8 +213,11 @@ class Aggregator:
             conf = confidences([sets[tid] for tid in tids]).tolist() if tids else []
             for i, tid, fp, c in zip(rows, tids, fps, conf):
                 views = sets[tid]
+                # Rates beyond what the message allows (a finite difference over estimates a few
+                # ms apart, without the filter) are clamped: one person's field, never the array.
+                vx, vy, yaw_rate = np.clip((fp.vx, fp.vy, fp.yaw_rate), -MAX_SPEED, MAX_SPEED).tolist()
                 self._poses[tid] = (pose_msg.PersonPose(
-                    id=tid, x=fp.x, y=fp.y, yaw=fp.yaw, vx=fp.vx, vy=fp.vy, yaw_rate=fp.yaw_rate,
+                    id=tid, x=fp.x, y=fp.y, yaw=fp.yaw, vx=vx, vy=vy, yaw_rate=yaw_rate,
                     cov=fp.cov, confidence=c, cameras=tuple(sorted(views)),
                     stamp_ns=newest[tid], views=len(views), estimator=est.source[i],
                 ), newest[tid])

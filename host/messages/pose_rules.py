@@ -17,7 +17,7 @@ from superbody.edge.messages.payload import (
     NAME_PATTERN,
 )
 
-__all__ = ["SCHEMA", "VERSION", "ENCODING", "MAX_PEOPLE", "MAX_CAMERAS", "MAX_PAYLOAD_BYTES", "PersonPoseMsgV1", "PersonPoseMsg", "PoseArrayMsgV1", "PoseArrayMsg"]
+__all__ = ["SCHEMA", "VERSION", "ENCODING", "MAX_PEOPLE", "MAX_SPEED", "MAX_CAMERAS", "MAX_PAYLOAD_BYTES", "PersonPoseMsgV1", "PersonPoseMsg", "PoseArrayMsgV1", "PoseArrayMsg"]
 
 
 SCHEMA: Final[str] = "superbody.people"
@@ -65,7 +65,8 @@ _MAX_VIEWS: Final[int] = 255
 _MAX_COORD_M: Final[float] = 1000.0
 
 
-_MAX_SPEED: Final[float] = 100.0  # m/s and rad/s: far beyond people, only stops garbage
+MAX_SPEED: Final[float] = 100.0  # m/s and rad/s: far beyond people, only stops garbage
+_MAX_SPEED: Final[float] = MAX_SPEED
 
 
 _MAX_COV: Final[float] = 1e6

@@ -237,3 +237,34 @@ def test_a_forged_high_sequence_number_costs_one_real_frame_not_the_camera(site)
             agg.ingest(_mutate(site, stamp_ns=now - 1_000_000, people=[], seq=10**9 + k), key, now)
         used += agg.ingest(wire.encode(cam.observe(now)[0]), key, now + 1_000_000)
     assert used == 3 * FPS - 3 and agg.rejected == {"seq_backwards": 3}
+
+
+class _Jumpy:
+    """Geometry whose yaw jumps by 3 rad on every other call: without the filter, rates of
+    ~3 rad per 22 ms between cameras' frames, beyond what a PoseArray may carry."""
+
+    def __init__(self, site):
+        self._inner, self._calls = AnalyticEstimator(site), 0
+
+    def estimate(self, view_sets):
+        pose = np.asarray(self._inner.estimate(view_sets), dtype=np.float64).copy()
+        self._calls += 1
+        pose[:, 2] = wrap_angle(pose[:, 2] + 3.0 * (self._calls % 2))
+        return pose
+
+
+def test_an_out_of_range_rate_is_clamped_and_every_pose_array_publishes(site):
+    from dataclasses import replace
+
+    from superbody.host.filtering.pose_filter import FilterConfig
+    from superbody.host.messages.pose_rules import MAX_SPEED
+
+    world = World(site, 2, seed=4)
+    agg = Aggregator(site, _Jumpy(site), "jumpy", HostConfig(filter=replace(FilterConfig(), enabled=False)))
+    at_limit = 0
+    for stamp, cam, payload in _frames(site, world, 5.0):
+        assert agg.ingest(payload, f"superbody/{site.name}/cameras/{cam}/observations", stamp)
+        arr = agg.step(stamp)
+        assert pose_msg.decode(pose_msg.encode(arr)).seq == arr.seq  # never unpublishable
+        at_limit += sum(abs(p.yaw_rate) == MAX_SPEED for p in arr.people)
+    assert at_limit > 0 and len(arr.people) == 2  # the clamp was needed, and nobody was dropped
