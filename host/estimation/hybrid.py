@@ -174,7 +174,7 @@ class HybridEstimator:
             raise ModelMismatchError(f"{net.path}: the hybrid estimator needs a model with a pose_std output (retrain it)")
         text = net.metadata.get(META_HYBRID)
         if not text:
-            raise ModelMismatchError(f"{net.path}: no {META_HYBRID} metadata (run superbody calibrate-hybrid on it)")
+            raise ModelMismatchError(f"{net.path}: no {META_HYBRID} metadata (run superbody calibrate hybrid on it)")
         try:
             self.calibration = HybridCalibration.from_json(text)
         except (ValueError, KeyError, TypeError) as e:

@@ -108,3 +108,23 @@ def test_support_gate_knows_the_floor():
     # inside; far away; just beyond the floor's edge (within the 0.5 m margin)
     assert _near_floor(pts, site, 0.5).tolist() == [True, False, True]
     assert _near_floor(pts, site, 0.0).tolist() == [True, False, False]
+
+
+def test_a_model_without_calibration_is_told_the_command_that_exists():
+    # The error once named `superbody calibrate-hybrid`, which is no command.
+    import shlex
+
+    from superbody.edge.cli import build_parser
+    from superbody.edge.resources import model_path
+    from superbody.host.estimation.estimator import ModelMismatchError, OnnxEstimator
+    from superbody.host.estimation.hybrid import META_HYBRID, HybridEstimator
+
+    site = load_site(WTF_SITE)
+    net = OnnxEstimator(model_path("wtf-apartment.fp32.onnx"), site)
+    del net.metadata[META_HYBRID]
+    with pytest.raises(ModelMismatchError, match="run superbody calibrate hybrid") as e:
+        HybridEstimator(net, site)
+    command = shlex.split(str(e.value).split("run superbody ", 1)[1].split(" on it")[0])
+    with pytest.raises(SystemExit) as done:
+        build_parser().parse_args([*command, "--help"])
+    assert done.value.code == 0

@@ -149,3 +149,15 @@ def test_uncertainty_grows_with_each_fallback(x):
     cam = camera(target=(4.0, 0.0, 0.5))
     sigmas = [ground_point(view(cam, x, 0.0, hide=h), cam)[1] for h in ((), ANKLES, LOWER, BELOW_HEAD)]
     assert sigmas == sorted(sigmas) and len(set(sigmas)) == 4
+
+
+def test_the_docstring_heights_are_the_body_model_s():
+    # The module docstring names the height of each level; they must be edge.body's.
+    import re
+
+    from superbody.edge.body import LEFT_HIP, LEFT_SHOULDER, TYPICAL_HEIGHT_M
+    from superbody.host.tracking import ground
+
+    stated = dict(re.findall(r"(ankles|hips|shoulders)[^\n>]*? at (\d\.\d+) m", ground.__doc__))
+    assert {k: float(v) for k, v in stated.items()} == {
+        "ankles": TYPICAL_HEIGHT_M[15], "hips": TYPICAL_HEIGHT_M[LEFT_HIP], "shoulders": TYPICAL_HEIGHT_M[LEFT_SHOULDER]}
