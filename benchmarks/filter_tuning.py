@@ -24,18 +24,18 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
+
+from superbody.edge.angles import wrap_angle
+from superbody.edge.resources import site_path
+from superbody.edge.site import load_site
+from superbody.host.aggregator import HostConfig
+from superbody.host.filtering.pose_filter import FilterConfig
+from superbody.models.evaluation.evaluate import predict
+from superbody.models.evaluation.temporal import replay, simulated_recording
+from superbody.models.evaluation.temporal_scores import jitter
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-import numpy as np  # noqa: E402
-
-from superbody.edge.angles import wrap_angle  # noqa: E402
-from superbody.edge.resources import site_path  # noqa: E402
-from superbody.edge.site import load_site  # noqa: E402
-from superbody.host.aggregator import HostConfig  # noqa: E402
-from superbody.host.filter import FilterConfig  # noqa: E402
-from superbody.models.evaluate import predict  # noqa: E402
-from superbody.models.temporal import jitter, replay, simulated_recording  # noqa: E402
 
 
 def _floats(text: str) -> list[float]:
@@ -66,12 +66,12 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"--model {args.model}: no such file")
     site = load_site(site_path("wtf-apartment"))
     if args.analytic:
-        from superbody.host.analytic import AnalyticEstimator
+        from superbody.host.estimation.analytic import AnalyticEstimator
 
         est, name = AnalyticEstimator(site), "analytic"
     else:
-        from superbody.host.estimator import OnnxEstimator
-        from superbody.host.hybrid import HybridEstimator
+        from superbody.host.estimation.estimator import OnnxEstimator
+        from superbody.host.estimation.hybrid import HybridEstimator
 
         est, name = HybridEstimator(OnnxEstimator(args.model, site), site), f"hybrid:{args.model.name}"
     base = HostConfig()

@@ -1,4 +1,4 @@
-"""Fuzz the two decoders every subscriber runs: Observation (edge.wire) and PoseArray (host.pose).
+"""Fuzz the two decoders every subscriber runs: Observation (edge.wire) and PoseArray (host.messages.pose).
 
     python benchmarks/fuzz.py [--n 100000] [--seed 0]        (make fuzz; not part of the test suite)
 
@@ -22,17 +22,15 @@ import traceback
 from collections import Counter
 from pathlib import Path
 
+import numpy as np
+
+from superbody.edge.messages import wire
+from superbody.edge.messages.payload import REASONS, DecodeError
+from superbody.edge.sim import SimCamera, World
+from superbody.edge.site import load_site
+from superbody.host.messages import pose as pose_msg
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-import numpy as np  # noqa: E402
-
-from superbody.edge.messages import wire  # noqa: E402
-from superbody.edge.messages.payload import REASONS, DecodeError  # noqa: E402
-from superbody.edge.sim import SimCamera, World  # noqa: E402
-from superbody.edge.site import load_site  # noqa: E402
-from superbody.host import pose as pose_msg  # noqa: E402
-
 SITE = ROOT / "deploy" / "sites" / "wtf-apartment.toml"
 T0 = 1_718_000_000 * 10**9
 

@@ -29,13 +29,11 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
+
+from superbody.host.aggregator import HostConfig
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-import numpy as np  # noqa: E402
-
-from superbody.host.aggregator import HostConfig  # noqa: E402
-
 DEFAULT_DEV = ROOT.parent / "shared" / "datasets" / "wheresthefellow" / "dev.json"
 
 
@@ -99,11 +97,11 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
 
     from superbody.edge.site import SiteError, load_site
-    from superbody.host.cli import build_estimator
-    from superbody.host.hybrid import HybridEstimator
-    from superbody.models.evaluate import format_table, score
-    from superbody.models.temporal import replay, view_stamps
-    from superbody.models.wtf import DatasetError, load_wtf_raw, to_samples
+    from superbody.host.estimation import build_estimator
+    from superbody.host.estimation.hybrid import HybridEstimator
+    from superbody.models.data.wtf import DatasetError, load_wtf_raw, to_samples
+    from superbody.models.evaluation.evaluate import format_table, score
+    from superbody.models.evaluation.temporal import replay, view_stamps
 
     try:
         cv = np.load(args.cv)

@@ -1,9 +1,9 @@
 """Soak: the whole system under load for a long time, with a hostile phase in the middle.
 
-    python benchmarks/soak.py [--minutes 30] [--cameras 10] [--people 10] [--fps 15]
+    python -m benchmarks.soak [--minutes 30] [--cameras 10] [--people 10] [--fps 15]
                               [--sample-every 60] [--warmup-minutes 5] [--prime-minutes 2] [--json-out F]
                               [--attack liveliness,oversize,garbage,future,flood | none]
-    (make soak ARGS="..."; not part of the test suite)
+    (from the repository: it imports benchmarks.host_bench; make soak ARGS="..."; not part of the test suite)
 
 A Zenoh router, one simulated camera process per camera of a ring of cameras around an 8 x 6 m
 room (benchmarks/host_bench.ring_site), and the host (the site-independent int8 model), all on
@@ -27,14 +27,14 @@ host's rejection counters. The host must keep publishing throughout and its memo
 What it found (each fixed in the product, with a test): Zenoh's shared-memory transport mapped
 every same-machine sender's 16 MiB pool into the host (edge/transport.py: now off), and
 onnxruntime's arena kept the size of the largest batch, 64 people in the flood
-(host/estimator.py: calls of at most 16 people, sized at start), and glibc's dynamic mmap
+(host/estimation/estimator.py: calls of at most 16 people, sized at start), and glibc's dynamic mmap
 threshold let the oversize payloads leave 6 MB in the heaps for good (host/memory.py: ``host
 run`` pins it at 128 KiB; the same 6-minute run moved 0.3 MB). What is left is a high-water
 mark: 64 tracks fed by 2 cameras' views spread the allocators' small blocks (in-process, 60 s of
 flood, 6 cameras x 5 people: +2.8 MB with the analytic estimator, +4.5 MB with the network).
 The host now gives free pages back at each status line (host/memory.py ``release_free_memory``:
 +2.8 -> +1.6 MB analytic) and makes onnxruntime's per-batch-size memory patterns at start-up
-(host/estimator.py: +4.5 -> +3.8 MB); a second flood, 60 s or 6 min, then adds 0.0-0.3 MB.
+(host/estimation/estimator.py: +4.5 -> +3.8 MB); a second flood, 60 s or 6 min, then adds 0.0-0.3 MB.
 30 minutes at 6 cameras x 5 people (``--prime-minutes 2``): the first attack stepped the host
 +10.0 MB (190.7 -> 200.6 MB, 64 ghost tracks published), the main one raised it to 202-205 MB
 while its 64 ghost tracks lived and left 200.8 MB; slope after the warm-up -0.009 MB/min,
@@ -55,20 +55,17 @@ import time
 from collections import Counter
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from benchmarks.host_bench import ring_site  # noqa: E402
-from superbody.edge import transport  # noqa: E402
+from benchmarks.host_bench import free_port, ring_site
+from superbody.edge import transport
 from superbody.edge.messages import wire
-from superbody.edge.sim import SimCamera, World  # noqa: E402
-from superbody.edge.site import dump_site  # noqa: E402
-from superbody.host import pose as pose_msg  # noqa: E402
-from superbody.host.demo import stop_processes  # noqa: E402
-from tests.conftest import free_port  # noqa: E402
+from superbody.edge.sim import SimCamera, World
+from superbody.edge.site import dump_site
+from superbody.host.demo import stop_processes
+from superbody.host.messages import pose as pose_msg
 
+ROOT = Path(__file__).resolve().parents[1]
 MODEL = ROOT / "models" / "site-independent.int8.onnx"
 # The hostile phase's components (--attack selects some, to find which one costs what).
 ATTACKS = ("liveliness", "oversize", "garbage", "future", "flood")

@@ -4,7 +4,7 @@
 
 The scoring (``models.evaluate.summarise``) moves each torso-centre estimate ``TRUTH_OFFSET_M``
 forward along its yaw, to where the dataset's chest-worn tracker should be. The analytic
-estimator (``host.analytic``) has nothing fitted to that truth, so its errors describe the truth
+estimator (``host.estimation.analytic``) has nothing fitted to that truth, so its errors describe the truth
 and the images rather than a model. Per camera count, its position error along the truth's
 heading (forward) and across it (left) is fitted to the truth's own velocity in those directions
 (central differences over +-0.1 s of the track, ``models.temporal.truth_track``):
@@ -33,11 +33,9 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-import numpy as np  # noqa: E402
-
 DEFAULT_DEV = ROOT.parent / "shared" / "datasets" / "wheresthefellow" / "dev.json"
 DEFAULT_SITE = ROOT / "deploy" / "sites" / "wtf-apartment.toml"
 STANDING_MPS = 0.05  # a truth slower than this stands still
@@ -54,10 +52,11 @@ def _fit(err: np.ndarray, speed: np.ndarray) -> tuple[float, float, float, float
 def budget(dataset: Path, site_path: Path) -> dict:
     from superbody.edge.angles import wrap_angle
     from superbody.edge.site import load_site
-    from superbody.host.analytic import AnalyticEstimator
-    from superbody.models.evaluate import predict
-    from superbody.models.temporal import truth_at, truth_track, view_stamps
-    from superbody.models.wtf import TRUTH_OFFSET_M, load_wtf_raw, to_samples, truth_to_torso
+    from superbody.host.estimation.analytic import AnalyticEstimator
+    from superbody.models.data.wtf import TRUTH_OFFSET_M, load_wtf_raw, to_samples, truth_to_torso
+    from superbody.models.evaluation.evaluate import predict
+    from superbody.models.evaluation.temporal import view_stamps
+    from superbody.models.evaluation.temporal_scores import truth_at, truth_track
 
     site = load_site(site_path)
     raw = load_wtf_raw(dataset)
