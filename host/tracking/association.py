@@ -10,10 +10,21 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
+from scipy.sparse.csgraph import connected_components
 
 from superbody.edge.colour import bhattacharyya_matrix
 
-__all__ = ["Match", "assign", "median_colour_distance"]
+__all__ = ["Match", "assign", "median_colour_distance", "duplicate_views", "DUPLICATE_SPREAD"]
+
+# Two skeletons of one frame whose shared joints lie on average within this fraction of the
+# skeleton's height of each other are one detection: people standing side by side are a body
+# width apart (about a quarter of their height), a detector's double report or a replayed copy
+# a few pixels.
+DUPLICATE_SPREAD = 0.1
+# Fewer shared joints than this cannot tell a copy from a neighbour.
+_MIN_SHARED_JOINTS = 5
+# A skeleton's height in pixels is at least this (a few joints close together say little).
+_MIN_HEIGHT_PX = 20.0
 
 
 @dataclass(frozen=True)
@@ -105,3 +116,41 @@ def median_colour_distance(hists: NDArray, history: NDArray, counts: NDArray) ->
     med = _median_over_history(d, np.asarray(counts))
     med[~(hists.sum(axis=1) > 0)] = np.nan
     return med
+
+
+def duplicate_views(keypoints: NDArray, n_joints: NDArray) -> NDArray[np.bool_]:
+    """Which of one frame's K skeletons repeat another: the same person reported more than once.
+
+    Two skeletons are close when they share at least ``_MIN_SHARED_JOINTS`` detected joints and
+    those joints lie, on average, within ``DUPLICATE_SPREAD`` of the taller one's height (the
+    vertical extent of its joints) of each other. Closeness links skeletons into groups
+    (transitively: a chain of copies a few pixels apart is one group however long it is); each
+    group keeps the skeleton with the most detected joints (ties: the first in the frame).
+    People side by side are a body width apart and never link.
+
+    Args:
+        keypoints: (K, 17, 2) pixel coordinates, NaN for joints not detected.
+        n_joints: (K,) detected joints of each.
+
+    Returns:
+        (K,) True for the copies.
+    """
+    k = len(keypoints)
+    if k < 2:
+        return np.zeros(k, dtype=bool)
+    vis = np.isfinite(keypoints).all(axis=2)  # (K, 17)
+    v = np.where(vis, keypoints[:, :, 1], np.nan)
+    with np.errstate(invalid="ignore"):
+        height = np.maximum(np.nanmax(v, axis=1) - np.nanmin(v, axis=1), _MIN_HEIGHT_PX)  # (K,)
+    shared = vis[:, None, :] & vis[None, :, :]  # (K, K, 17)
+    d = np.linalg.norm(np.where(shared[..., None], keypoints[:, None] - keypoints[None, :], 0.0), axis=3)  # (K, K, 17)
+    n_shared = shared.sum(axis=2)  # (K, K)
+    mean_d = d.sum(axis=2) / np.maximum(n_shared, 1)  # (K, K)
+    close = (n_shared >= _MIN_SHARED_JOINTS) & (mean_d <= DUPLICATE_SPREAD * np.maximum(height[:, None], height[None, :]))
+    _, group = connected_components(close, directed=False)  # (K,) group of each skeleton
+    best = {}
+    for i in np.argsort(-np.asarray(n_joints), kind="stable").tolist():
+        best.setdefault(int(group[i]), i)
+    keep = np.zeros(k, dtype=bool)
+    keep[list(best.values())] = True
+    return ~keep

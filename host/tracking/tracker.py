@@ -18,6 +18,9 @@ and a person unseen for 2 s is removed. This one adds:
   are usually a known person under another camera's light, or a partial view whose box puts
   them metres away; starting a candidate from them breeds duplicates that later split a
   person's views between two ids. (The ground rule applies only with ``use_geometry``.)
+- one person is one detection: skeletons of one frame whose shared joints nearly coincide
+  (``association.duplicate_views``: a detector's double report, a flood of replayed copies) are
+  one view, the one with the most joints (counted as ``duplicate_views``);
 - time from the messages: everything runs on capture stamps and an injected ``now_ns``. A
   camera's frames are admitted in order (``Tracker.admit``): a frame older than the newest one
   admitted from that camera is "late", one with the same stamp or sequence number a
@@ -56,7 +59,7 @@ from numpy.typing import NDArray
 
 from superbody.edge.messages.observation import Observation, PersonView
 from superbody.edge.site import Site
-from superbody.host.tracking.association import Match, _amplitudes, _median_over_history, assign
+from superbody.host.tracking.association import Match, _amplitudes, _median_over_history, assign, duplicate_views
 from superbody.host.tracking.config import TrackerConfig
 from superbody.host.tracking.ground import ground_points
 from superbody.host.tracking.motion import _NS_PER_S, fuse_positions, predict_positions
@@ -112,7 +115,7 @@ DROP_REASONS: Final[tuple[str, ...]] = ("wrong_site", "unknown_camera", "stale",
 _STATS = (
     "observations", "views", "late_dropped", "duplicate_dropped", "stale_dropped", "seq_backwards_dropped", "wrong_site",
     "unknown_camera", "too_few_joints", "track_cap", "evicted_candidates", "too_few_joints_new", "no_ground_point", "no_signature",
-    "unplaced_new", "suppressed", "matched", "new_candidates", "confirmed", "removed", "dropped_candidates", "reidentified",
+    "unplaced_new", "suppressed", "duplicate_views", "matched", "new_candidates", "confirmed", "removed", "dropped_candidates", "reidentified",
 )
 
 
@@ -241,6 +244,9 @@ class Tracker:
         enough = n_joints >= cfg.min_joints
         st["too_few_joints"] += int(n - enough.sum())
         idx = np.flatnonzero(enough)  # (K,) the views we use
+        copies = duplicate_views(kps[idx, :, :2], n_joints[idx])  # one person reported twice, or a flood of copies
+        st["duplicate_views"] += int(copies.sum())
+        idx = idx[~copies]
         if not len(idx):
             return _Views(idx, n_joints, np.zeros((0, 2)), np.zeros(0), np.zeros(0, bool), np.zeros((0, _BINS), np.float32),
                           np.zeros(0, bool), np.zeros((0, _BINS)))

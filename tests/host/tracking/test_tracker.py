@@ -597,7 +597,7 @@ def test_reidentification_needs_a_clear_winner_and_a_reachable_place():
 
 # --- a cap on tracks --------------------------------------------------------------------------------
 
-def test_tracks_are_capped_and_people_already_tracked_keep_their_ids():
+def test_a_flood_of_copies_is_one_detection_and_people_already_tracked_keep_their_ids():
     # A flood: 70 copies of one view per frame besides a real person, 5 frames/s for 10 s.
     tr = Tracker(SITE)
     real = {"a": (-2.0, 0.0, 0.0, 110.0)}
@@ -611,8 +611,24 @@ def test_tracks_are_capped_and_people_already_tracked_keep_their_ids():
         obs = Observation(obs.site, obs.camera, obs.seq, t, obs.width, obs.height, obs.people + (fake,) * 70)
         ms = tr.update(obs)
         assert ms[0].track_id == person.id  # the real person keeps their id
-        assert len(tr.tracks) <= TrackerConfig().max_tracks
-    assert tr.stats["track_cap"] > 0 and len(tr.people(t)) <= 64
+        assert [m.status for m in ms[2:]] == ["ignored"] * 69  # the copies of the one kept
+    assert tr.stats["duplicate_views"] == 50 * 69 and len(tr.tracks) == 2 and len(tr.people(t)) == 2
+
+
+def test_tracks_are_capped_and_people_already_tracked_keep_their_ids():
+    # More distinct people than the cap, every frame: the cap holds, the tracked person stays.
+    tr = Tracker(SITE, TrackerConfig(max_tracks=3))
+    real = {"a": (-2.0, 0.0, 0.0, 110.0)}
+    for k in range(25):
+        tr.update(frame(C1, T0 + k * S // 10, real, seed=k)[0])
+    (person,) = tr.people(T0 + 25 * S // 10)
+    crowd = {**real, **{f"f{j}": (-1.0 + 0.9 * j, 1.5, 0.0, 20.0 + 30 * j) for j in range(5)}}
+    for k in range(20):
+        t = T0 + 25 * S // 10 + k * S // 5
+        ms = tr.update(frame(C1, t, crowd, seed=k)[0])
+        assert person.id in [m.track_id for m in ms]  # the real person keeps their id
+        assert len(tr.tracks) <= 3
+    assert tr.stats["track_cap"] > 0
 
 
 def test_a_full_tracker_makes_room_by_evicting_the_stalest_candidate():

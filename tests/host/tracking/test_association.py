@@ -1,0 +1,49 @@
+"""Duplicate skeletons within one frame (host/tracking/association.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from superbody.edge.sim import skeleton
+from superbody.edge.site import load_site
+from superbody.host.tracking.association import duplicate_views
+from tests.conftest import WTF_SITE
+
+
+def _people_in_one_view(offsets: list[float]) -> np.ndarray:
+    """(K, 17, 2) skeletons of people standing 3 m in front of the site's camera 1, each moved
+    sideways by its offset (metres), facing the camera, as that camera sees them."""
+    from superbody.edge.camera import project
+
+    cam = load_site(WTF_SITE).camera("1")
+    fwd = cam.R[:, 2][:2] / np.linalg.norm(cam.R[:, 2][:2])  # the optical axis on the floor
+    side = np.array([-fwd[1], fwd[0]])
+    yaw = float(np.arctan2(-fwd[1], -fwd[0]))
+    out = []
+    for s in offsets:
+        x, y = np.asarray(cam.t[:2]) + 3.0 * fwd + s * side
+        uv, _ = project(np.asarray(skeleton(x, y, yaw, 0.0, 0.0), dtype=np.float64), cam)
+        out.append(np.asarray(uv, dtype=np.float64)[:, :2])
+    return np.array(out)
+
+
+def test_copies_a_few_pixels_apart_are_one_detection():
+    base = _people_in_one_view([0.0])[0]
+    copies = np.array([base + [6.0 * k, 0.0] for k in range(64)])  # the flood: 64 copies, 6 px apart
+    dup = duplicate_views(copies, np.full(64, 17))
+    assert dup.sum() == 63 and not dup[0]  # a chain of copies is one detection, however long
+
+
+def test_people_standing_side_by_side_are_all_kept():
+    xs = [-0.7, -0.25, 0.2, 0.65]  # four people 45 cm apart (shoulder to shoulder), one camera
+    kp = _people_in_one_view(xs)
+    assert not duplicate_views(kp, np.full(len(xs), 17)).any()
+
+
+def test_the_skeleton_with_more_joints_is_kept_and_few_shared_joints_prove_nothing():
+    kp = _people_in_one_view([0.0, 0.0])
+    kp[0, :8] = np.nan  # the first is a partial view of the same person
+    dup = duplicate_views(kp, np.array([9, 17]))
+    assert list(dup) == [True, False]
+    kp[1, 4:] = np.nan  # now they share only 0 joints: not enough to call them one
+    assert not duplicate_views(kp, np.array([9, 4])).any()
