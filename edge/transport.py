@@ -157,7 +157,7 @@ def session_config(
     listen: list[str] | None = None,
     config_file: str | None = None,
     cfg: list[str] | None = None,
-) -> "zenoh.Config":
+) -> zenoh.Config:
     """Build a Zenoh config.
 
     Args:

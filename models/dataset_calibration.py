@@ -18,8 +18,9 @@ The maths is pure functions on arrays; ``calibrate_dataset`` puts them together 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Final, Sequence
+from typing import Final
 
 import cv2
 import numpy as np

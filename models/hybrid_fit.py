@@ -31,9 +31,10 @@ fp32 one (which left its two-camera y 3% worse than geometry's).
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Final, Sequence
+from typing import Final
 
 import numpy as np
 from numpy.typing import NDArray

@@ -88,7 +88,7 @@ def decode_std(out: NDArray, scale: float) -> NDArray[np.float64]:
     return s * [scale, scale, 1.0]
 
 
-def pose_nll(out: "torch.Tensor", y: "torch.Tensor") -> "torch.Tensor":
+def pose_nll(out: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
     """(B,) negative log-likelihood of the targets under the predicted uncertainty.
 
     Position: a Gaussian per axis with log-sigma ``out[:, 4:6]``; yaw: a von Mises with

@@ -6,8 +6,8 @@ import json
 import os
 import socket
 import subprocess
-import threading
 import sys
+import threading
 from pathlib import Path
 
 import pytest

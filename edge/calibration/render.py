@@ -6,7 +6,7 @@ calibration against cameras whose pose is known exactly.
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import cv2
 import numpy as np

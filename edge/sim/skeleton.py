@@ -47,12 +47,12 @@ def skeleton(x: float, y: float, yaw: float, phase: float, walk: float, height_m
     """
     s = height_m / 1.75
     f = np.array([math.cos(yaw), math.sin(yaw), 0.0])  # facing
-    l = np.array([-math.sin(yaw), math.cos(yaw), 0.0])  # left
+    left = np.array([-math.sin(yaw), math.cos(yaw), 0.0])
     z = np.array([0.0, 0.0, 1.0])
     base = np.array([x, y, 0.0])
     lateral = _LATERAL * s * width_scale
     forward = _FORWARD * s
-    j = base + lateral[:, None] * l + forward[:, None] * f + (_HEIGHT * s)[:, None] * z  # (17, 3)
+    j = base + lateral[:, None] * left + forward[:, None] * f + (_HEIGHT * s)[:, None] * z  # (17, 3)
     leg_amp, arm_amp = 0.38 * walk, 0.32 * walk
     leg = (_HEIGHT[11] - _HEIGHT[15]) * s  # hip to ankle
     thigh, shin, upper, fore = 0.52 * leg, 0.48 * leg, 0.31 * s, 0.27 * s
@@ -65,7 +65,7 @@ def skeleton(x: float, y: float, yaw: float, phase: float, walk: float, height_m
         beta = 0.15 + 0.35 * walk * max(0.0, math.sin(-(phase + side)))  # elbow flex
         if held:  # upper arm a little forward, forearm raised: the wrist at chest height
             alpha, beta = 0.35 + 0.05 * math.sin(phase), 1.8
-        j[elb] = j[sh] + upper * (math.sin(alpha) * f - math.cos(alpha) * z) + 0.02 * s * l * (1 if side == 0 else -1)
+        j[elb] = j[sh] + upper * (math.sin(alpha) * f - math.cos(alpha) * z) + 0.02 * s * left * (1 if side == 0 else -1)
         j[wri] = j[elb] + fore * (math.sin(alpha + beta) * f - math.cos(alpha + beta) * z)
     # The stance foot carries the body: keep the lowest ankle at its standing height.
     j[:, 2] += _HEIGHT[15] * s - min(j[15, 2], j[16, 2])

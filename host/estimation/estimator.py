@@ -25,9 +25,10 @@ from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Final, Mapping, Protocol, Sequence, runtime_checkable
+from typing import Final, Protocol, runtime_checkable
 
 import numpy as np
 import onnxruntime as ort
@@ -92,7 +93,7 @@ class Estimates:
     source: tuple[str, ...]
 
 
-def estimate_detailed(estimator: "Estimator", view_sets: Sequence[Mapping[str, PersonView]], source: str) -> Estimates:
+def estimate_detailed(estimator: Estimator, view_sets: Sequence[Mapping[str, PersonView]], source: str) -> Estimates:
     """``estimator.estimate_detailed`` when it has one; otherwise its poses, no sigmas, and
     ``source`` for every person."""
     detailed = getattr(estimator, "estimate_detailed", None)

@@ -43,9 +43,9 @@ not a proper box) for u, v and for the ray.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Mapping, Sequence
 
 import numpy as np
 from numpy.typing import NDArray

@@ -5,8 +5,9 @@ described at the top of ``host/estimation/graph.py``, which builds the graphs.""
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Final, Literal, Mapping, Sequence, get_args
+from typing import Final, Literal, get_args
 
 import numpy as np
 from numpy.typing import NDArray

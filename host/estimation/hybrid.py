@@ -98,7 +98,7 @@ class HybridCalibration:
                            "source": self.source})
 
     @classmethod
-    def from_json(cls, text: str) -> "HybridCalibration":
+    def from_json(cls, text: str) -> HybridCalibration:
         d = json.loads(text)
         return cls(analytic_std=tuple(tuple(float(v) for v in s) for s in d["analytic_std"]),
                    analytic_yaw_std_no_pair=float(d.get("analytic_yaw_std_no_pair", 3.0)),

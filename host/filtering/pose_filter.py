@@ -13,8 +13,8 @@ Process noise: piecewise-constant white acceleration (Bar-Shalom), per axis
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 from numpy.typing import NDArray

@@ -52,7 +52,8 @@ if fresh, for the GNN.
 from __future__ import annotations
 
 import math
-from typing import Final, NamedTuple, Sequence
+from collections.abc import Sequence
+from typing import Final, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray

@@ -214,31 +214,16 @@ def _model_names(paths: list[Path]) -> list[str]:
 
 
 def _run_eval(args: argparse.Namespace) -> int:
-    import math
 
     from superbody.edge.site import SiteError, load_site
     from superbody.models.data.wtf import DatasetError, load_wtf_raw, to_samples
 
     command = "eval"
-    if not (math.isfinite(args.truth_offset) and abs(args.truth_offset) <= _MAX_TRUTH_OFFSET_M):
-        return _fail(command, f"--truth-offset must be metres in [-{_MAX_TRUTH_OFFSET_M:g}, {_MAX_TRUTH_OFFSET_M:g}], got {args.truth_offset}")
-    if args.batch_size < 1:
-        return _fail(command, f"--batch-size must be >= 1, got {args.batch_size}")
     paths = args.model or []
-    if args.estimator == _BASELINE and paths:
-        return _fail(command, "--model cannot be combined with --estimator analytic (it scores the analytic estimator alone)")
-    if args.estimator == "onnx" and not paths:
-        return _fail(command, "--model M.onnx is required (or --estimator analytic)")
     names = _model_names(paths) if paths else [_BASELINE]
-    if paths and len(set(names)) < len(names):
-        return _fail(command, f"--model: the same model is given twice: {', '.join(sorted({n for n in names if names.count(n) > 1}))}")
-    if paths and _BASELINE in names:
-        return _fail(command, f"--model {_BASELINE!r}: the name is taken by the baseline; rename the file")
-    if args.plots is not None:
-        import importlib.util
-
-        if importlib.util.find_spec("matplotlib") is None:
-            return _fail(command, "--plots needs matplotlib (pip install 'superbody[train]')")
+    problem = _eval_arg_problem(args, paths, names)
+    if problem:
+        return _fail(command, problem)
     try:
         site = load_site(args.site)
         raw = load_wtf_raw(args.dataset)
@@ -249,7 +234,7 @@ def _run_eval(args: argparse.Namespace) -> int:
 
     from superbody.host.estimation.analytic import AnalyticEstimator
     from superbody.host.estimation.hybrid import HybridEstimator
-    from superbody.models.evaluation.evaluate import format_table, json_report, predict, score, write_predictions_csv
+    from superbody.models.evaluation.evaluate import format_table, predict, score
 
     # A hybrid model is also scored as its network alone, to show what the fusion adds.
     host_names = {}
@@ -287,29 +272,59 @@ def _run_eval(args: argparse.Namespace) -> int:
         for name, scan in scans.items():
             print(format_latency_scan(name, scan))
     try:
-        if args.json_out is not None:
-            shown = names + [n for n in estimators if n.endswith(" (network)")]
-            doc = json_report(reports, shown, _BASELINE, args.truth_offset)
-            doc["dataset"], doc["site"] = str(args.dataset), str(args.site)
-            if temporal is not None:
-                doc["temporal"] = dict(json_report(temporal[0], shown, _BASELINE, args.truth_offset), at=args.temporal_at,
-                                       replay=temporal[1], signature=_SIGNATURE_NOTE)
-            if scans is not None:
-                doc["latency_scan"] = scans
-            args.json_out.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
-            print(f"wrote {args.json_out}")
-        if args.predictions_out is not None:
-            pred = temporal[2][names[0]] if temporal is not None else predictions[names[0]]
-            write_predictions_csv(args.predictions_out, samples, pred, args.truth_offset)
-            print(f"wrote {args.predictions_out}")
-        if args.plots is not None:
-            from superbody.models.evaluation.plots import write_plots
-
-            for path in write_plots(args.plots, samples, predictions, args.truth_offset):
-                print(f"wrote {path}")
+        _write_eval_outputs(args, names, samples, estimators, reports, predictions, temporal, scans)
     except OSError as e:
         return _fail(command, f"{e.filename}: {e.strerror or e}")
     return 0
+
+
+def _eval_arg_problem(args: argparse.Namespace, paths: list[Path], names: list[str]) -> str | None:
+    """What is wrong with ``eval``'s arguments, or None."""
+    import importlib.util
+    import math
+
+    if not (math.isfinite(args.truth_offset) and abs(args.truth_offset) <= _MAX_TRUTH_OFFSET_M):
+        return f"--truth-offset must be metres in [-{_MAX_TRUTH_OFFSET_M:g}, {_MAX_TRUTH_OFFSET_M:g}], got {args.truth_offset}"
+    if args.batch_size < 1:
+        return f"--batch-size must be >= 1, got {args.batch_size}"
+    if args.estimator == _BASELINE and paths:
+        return "--model cannot be combined with --estimator analytic (it scores the analytic estimator alone)"
+    if args.estimator == "onnx" and not paths:
+        return "--model M.onnx is required (or --estimator analytic)"
+    if paths and len(set(names)) < len(names):
+        return f"--model: the same model is given twice: {', '.join(sorted({n for n in names if names.count(n) > 1}))}"
+    if paths and _BASELINE in names:
+        return f"--model {_BASELINE!r}: the name is taken by the baseline; rename the file"
+    if args.plots is not None and importlib.util.find_spec("matplotlib") is None:
+        return "--plots needs matplotlib (pip install 'superbody[train]')"
+    return None
+
+
+def _write_eval_outputs(args: argparse.Namespace, names: list[str], samples, estimators: dict, reports, predictions: dict,
+                        temporal, scans) -> None:
+    """``eval``'s --json-out, --predictions-out and --plots (OSError for a file it cannot write)."""
+    from superbody.models.evaluation.evaluate import json_report, write_predictions_csv
+
+    if args.json_out is not None:
+        shown = names + [n for n in estimators if n.endswith(" (network)")]
+        doc = json_report(reports, shown, _BASELINE, args.truth_offset)
+        doc["dataset"], doc["site"] = str(args.dataset), str(args.site)
+        if temporal is not None:
+            doc["temporal"] = dict(json_report(temporal[0], shown, _BASELINE, args.truth_offset), at=args.temporal_at,
+                                   replay=temporal[1], signature=_SIGNATURE_NOTE)
+        if scans is not None:
+            doc["latency_scan"] = scans
+        args.json_out.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+        print(f"wrote {args.json_out}")
+    if args.predictions_out is not None:
+        pred = temporal[2][names[0]] if temporal is not None else predictions[names[0]]
+        write_predictions_csv(args.predictions_out, samples, pred, args.truth_offset)
+        print(f"wrote {args.predictions_out}")
+    if args.plots is not None:
+        from superbody.models.evaluation.plots import write_plots
+
+        for path in write_plots(args.plots, samples, predictions, args.truth_offset):
+            print(f"wrote {path}")
 
 
 def _eval_temporal(args, raw, samples, site, estimators: dict, host_names: dict, predictions: dict) -> tuple[dict, dict, dict]:

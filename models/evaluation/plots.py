@@ -10,8 +10,9 @@ dataset's chest-tracker point (``models.data.wtf.torso_to_truth``) by ``truth_of
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Final, Mapping, Sequence
+from typing import TYPE_CHECKING, Final
 
 import numpy as np
 from numpy.typing import NDArray

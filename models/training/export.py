@@ -28,8 +28,9 @@ from __future__ import annotations
 import json
 import tempfile
 import warnings
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
-from typing import Iterable, Iterator, Literal, Mapping, Sequence
+from typing import Literal
 
 import numpy as np
 import onnx

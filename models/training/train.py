@@ -257,7 +257,7 @@ def train(cfg: TrainConfig, progress: bool = True) -> TrainResult:
                 bar.set_postfix(loss=f"{total / (s + 1):.4f}")
         val_out, val_y = _predict(model, forward, val, cfg.batch_size)
         # Early stopping on the pose alone: the uncertainty must not choose the epoch.
-        val_loss = float(((((val_out[:, :4] - val_y) ** 2) * w.numpy()).mean())) if len(val) else total / steps_per_epoch
+        val_loss = float((((val_out[:, :4] - val_y) ** 2) * w.numpy()).mean()) if len(val) else total / steps_per_epoch
         row = {"epoch": epoch + 1, "train_loss": total / steps_per_epoch, "val_loss": val_loss, "minutes": (time.monotonic() - t0) / 60,
                **(_metrics(val_out, val_y, model.scale) if len(val) else {})}
         history.append(row)

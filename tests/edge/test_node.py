@@ -12,8 +12,8 @@ import pytest
 import zenoh
 
 from superbody.edge import transport
-from superbody.edge.messages import wire
 from superbody.edge.body import INDEX
+from superbody.edge.messages import wire
 from superbody.edge.node import SourceSpec, box_histogram, frame_observation, parse_source
 from superbody.edge.sim import SimCamera, World
 from superbody.edge.site import load_site
@@ -158,8 +158,8 @@ def test_a_frame_that_cannot_be_encoded_is_skipped_not_fatal(listener):
     """A source that produces an invalid observation: the node logs it, skips it and goes on."""
     import numpy as np
 
-    from superbody.edge.node import run_node
     from superbody.edge.messages.observation import PersonView
+    from superbody.edge.node import run_node
     from superbody.edge.sources.sim_source import SimSource
     from superbody.edge.sources.source import Frame
 

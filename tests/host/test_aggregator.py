@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment
 
-from superbody.edge.messages import wire
 from superbody.edge.angles import wrap_angle
+from superbody.edge.messages import wire
 from superbody.edge.sim import SimCamera, World
 from superbody.edge.site import load_site
 from superbody.host.aggregator import Aggregator, HostConfig, confidence, confidences

@@ -52,7 +52,7 @@ class HostThread:
         with self.cv:
             return [a for ts, a in self.published if ts >= t]
 
-    def __enter__(self) -> "HostThread":
+    def __enter__(self) -> HostThread:
         self.thread.start()
         assert self.wait(lambda: len(self.published) >= 2, timeout=20), "the host never published"
         return self

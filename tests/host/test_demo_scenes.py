@@ -18,9 +18,9 @@ import pytest
 from scipy.optimize import linear_sum_assignment
 
 from superbody.edge.messages import wire
-from superbody.edge.sources.sim_source import SimSource
 from superbody.edge.sim import SimCamera, World
 from superbody.edge.site import load_site
+from superbody.edge.sources.sim_source import SimSource
 from superbody.host.aggregator import Aggregator
 from superbody.host.estimation.analytic import AnalyticEstimator
 from tests.conftest import WTF_SITE

@@ -9,8 +9,8 @@ import numpy as np
 
 from superbody.edge.sim import World
 from superbody.edge.site import load_site
-from superbody.host.messages import pose as pose_msg
 from superbody.host.demo import _Watcher
+from superbody.host.messages import pose as pose_msg
 from tests.conftest import WTF_SITE
 
 S = 1_000_000_000

@@ -13,7 +13,7 @@ from superbody.edge.messages import wire
 from superbody.edge.sim import SimCamera, World
 from superbody.edge.site import load_site
 from superbody.host.demo import DemoConfig, run_demo
-from tests.conftest import HostWatch, WTF_SITE, free_port
+from tests.conftest import WTF_SITE, HostWatch, free_port
 
 SITE = str(WTF_SITE)
 

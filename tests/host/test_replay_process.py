@@ -28,10 +28,10 @@ import numpy as np
 import zenoh
 
 from superbody.edge import transport
-from superbody.edge.sources.replay import scan_recording
 from superbody.edge.site import load_site
+from superbody.edge.sources.replay import scan_recording
 from superbody.host.messages import pose as pose_msg
-from tests.conftest import HostWatch, WTF_SITE, free_port
+from tests.conftest import WTF_SITE, HostWatch, free_port
 
 SITE = str(WTF_SITE)
 PEOPLE = 2

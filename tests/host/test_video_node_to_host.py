@@ -7,11 +7,10 @@ publish people whose views include camera 1's.
 
 from __future__ import annotations
 
-
 import zenoh
 
 from superbody.edge import transport
-from tests.conftest import HostWatch, WTF_SITE, free_port
+from tests.conftest import WTF_SITE, HostWatch, free_port
 from tests.edge.photos import astronaut_video
 
 SITE = str(WTF_SITE)

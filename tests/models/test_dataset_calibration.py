@@ -23,8 +23,8 @@ from superbody.models.dataset_calibration import (
     normalised_dlt,
     reprojection_errors,
 )
-
-from tests.conftest import DEV_JSON, WTF_SITE as SITE_TOML
+from tests.conftest import DEV_JSON
+from tests.conftest import WTF_SITE as SITE_TOML
 
 
 def _camera(position, target, fx=617.0, fy=617.0, cx=320.0, cy=240.0, width=640, height=480) -> Camera:

@@ -13,7 +13,20 @@ torch = pytest.importorskip("torch")
 from superbody.edge.site import load_site  # noqa: E402
 from superbody.host.estimation.hybrid import fuse  # noqa: E402
 from superbody.models.evaluation.crossval import spatial_folds  # noqa: E402
-from superbody.models.hybrid_fit import NET_DEBIAS, TRUST_GRID, fit_analytic, fit_calibration, fit_net_bias, fit_std_scale, fit_trust, hybrid_poses, leave_one_fold_out, robust_sigma, scaled_std, sigma_coverage  # noqa: E402
+from superbody.models.hybrid_fit import (  # noqa: E402
+    NET_DEBIAS,
+    TRUST_GRID,
+    fit_analytic,
+    fit_calibration,
+    fit_net_bias,
+    fit_std_scale,
+    fit_trust,
+    hybrid_poses,
+    leave_one_fold_out,
+    robust_sigma,
+    scaled_std,
+    sigma_coverage,
+)
 from superbody.models.nets import pose_nll  # noqa: E402
 from tests.conftest import WTF_SITE  # noqa: E402
 

@@ -11,8 +11,8 @@ from superbody.edge.messages.observation import PersonView  # noqa: E402
 from superbody.edge.site import Site, parse_site  # noqa: E402
 from superbody.host.estimation.graph import NUM_RELATIONS, GraphSpec, build_batch, floor_centre  # noqa: E402
 from superbody.models.nets import (  # noqa: E402
-    OUT_DIM,
     ARCHS,
+    OUT_DIM,
     GATLayer,
     RGCNLayer,
     build_model,
@@ -140,8 +140,8 @@ def test_gat_layer_matches_the_formula():
 
 def test_rgcn_layer_matches_the_formula():
     torch.manual_seed(0)
-    N, D, O, R, nb = 5, 4, 3, 3, 2
-    layer = RGCNLayer(D, O, R, nb)
+    N, D, Dout, R, nb = 5, 4, 3, 3, 2
+    layer = RGCNLayer(D, Dout, R, nb)
     h = torch.randn(1, N, D)
     adj = (torch.rand(1, R, N, N) > 0.5).float()
     A = adj / adj.sum(-1, keepdim=True).clamp(min=1)

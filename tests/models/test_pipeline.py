@@ -128,8 +128,8 @@ def test_calibrate_hybrid_writes_the_model_that_the_host_then_runs_as_hybrid(tin
 
 # (arguments, text the one-line error must contain)
 def test_view_subsets_are_every_proper_subset_of_a_real_frame_with_its_truth(dev_json):
-    from superbody.models.training.train import view_subsets
     from superbody.models.data.wtf import load_wtf
+    from superbody.models.training.train import view_subsets
 
     samples = load_wtf(dev_json)
     by_count = {k: [s for s in samples if len(s.views) == k] for k in (1, 2, 3)}

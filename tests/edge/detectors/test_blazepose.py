@@ -63,7 +63,7 @@ def test_blazepose_finds_the_astronaut():
         assert k0.shape == (0, 17, 3) and b0.shape == (0, 4)
         # The mirrored photo: the joints mirror and swap sides.
         km, _ = bp.detect(astronaut_bgr()[:, ::-1].copy())
-        for name, xy in ASTRONAUT.items():
+        for name in ASTRONAUT:
             u, v, _ = km[0, INDEX[name]]
             side = name.replace("left", "RIGHT").replace("right", "left").replace("RIGHT", "right")
             u0, v0 = ASTRONAUT[side]

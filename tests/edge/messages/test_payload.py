@@ -4,7 +4,8 @@ each helper accepts and rejects, with the field, reason and message it gives."""
 from __future__ import annotations
 
 import pickle
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import pytest

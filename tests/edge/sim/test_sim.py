@@ -6,11 +6,10 @@ import numpy as np
 import pytest
 
 from superbody.edge import body
-from superbody.edge.colour import bhattacharyya_matrix
 from superbody.edge.angles import wrap_angle
+from superbody.edge.colour import bhattacharyya_matrix
 from superbody.edge.sim import NoiseModel, SimCamera, World, render_views, skeleton
 from superbody.edge.site import load_site
-
 from tests.conftest import LAB_SITE
 
 T0 = 1.7e9  # an absolute time in seconds

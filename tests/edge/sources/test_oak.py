@@ -32,11 +32,11 @@ import depthai as dai  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from superbody.edge.sources import oak  # noqa: E402
 from superbody.edge.messages.observation import Observation  # noqa: E402
-from superbody.edge.site import parse_site  # noqa: E402
-from superbody.edge.sources.source import SourceError  # noqa: E402
 from superbody.edge.messages.wire import decode, encode  # noqa: E402
+from superbody.edge.site import parse_site  # noqa: E402
+from superbody.edge.sources import oak  # noqa: E402
+from superbody.edge.sources.source import SourceError  # noqa: E402
 
 W, H = 512, 288  # the zoo model's NN frame
 STRIDES = (8, 16, 32)

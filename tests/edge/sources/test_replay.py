@@ -16,9 +16,9 @@ import pytest
 from superbody.edge import transport
 from superbody.edge.messages import wire
 from superbody.edge.node import SourceSpec, parse_source
-from superbody.edge.sources.replay import ReplaySource, scan_recording
 from superbody.edge.sim import SimCamera, World
 from superbody.edge.site import load_site
+from superbody.edge.sources.replay import ReplaySource, scan_recording
 from superbody.edge.sources.source import SourceError
 from superbody.host.outputs.record import Recorder
 from tests.conftest import LAB_SITE, WTF_SITE

@@ -51,8 +51,8 @@ def people(n: int, seed: int = 0, cameras=("1", "2", "3")) -> list[dict[str, Per
 def models(tmp_path_factory):
     """Tiny exported models: GAT "site" and RGCN "rays"; with their PyTorch originals."""
     from superbody.host.estimation.graph import floor_centre
-    from superbody.models.training.export import export_onnx
     from superbody.models.nets import build_model
+    from superbody.models.training.export import export_onnx
 
     out = {}
     d = tmp_path_factory.mktemp("models")

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from superbody.edge.angles import wrap_angle
-from superbody.host.filtering.pose_filter import FilterConfig, PoseFilter
 from superbody.host.filtering.kalman import predict, update
+from superbody.host.filtering.pose_filter import FilterConfig, PoseFilter
 
 S = 1_000_000_000  # ns per second
 DEG = math.pi / 180
@@ -223,13 +223,13 @@ def test_update_many_rejects_bad_input_like_update():
 def test_the_batched_step_is_the_textbook_six_state_filter():
     # _step writes the filter out per axis; here the same step with predict() and update() on
     # the full 6 x 6 matrices, for filters in mid-track (rates, cross terms within each axis).
-    from superbody.host.filtering.pose_filter import _step
-    from superbody.host.filtering.kalman import predict, update
     from superbody.edge.angles import wrap_angle
+    from superbody.host.filtering.kalman import predict, update
+    from superbody.host.filtering.pose_filter import _step
 
     rng = np.random.default_rng(5)
     filters = [PoseFilter() for _ in range(5)]
-    for k, f in enumerate(filters):
+    for f in filters:
         f.update(0, *rng.normal(0, 2, 2), rng.uniform(-math.pi, math.pi))
         for j in range(1, 6):  # build up rates and position-rate covariances
             f.update(j * S // 10, *rng.normal(0, 2, 2), rng.uniform(-math.pi, math.pi), tuple(np.abs(rng.normal(0.3, 0.1, 3))))

@@ -106,8 +106,8 @@ def test_host_status_before_any_observation_is_strict_json() -> None:
     from superbody.edge.clock import WorldClock
     from superbody.edge.site import load_site
     from superbody.host.aggregator import Aggregator, HostConfig
-    from superbody.host.service import run_host
     from superbody.host.estimation.analytic import AnalyticEstimator
+    from superbody.host.service import run_host
     from tests.conftest import WTF_SITE, free_port
 
     site = load_site(WTF_SITE)

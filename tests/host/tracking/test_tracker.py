@@ -19,9 +19,9 @@ from superbody.edge.camera import Camera, look_at_rotation, project
 from superbody.edge.colour import bhattacharyya, hs_histogram
 from superbody.edge.messages.observation import Observation, PersonView, empty_histogram
 from superbody.edge.site import Site
-from superbody.host.tracking.tracker import Tracker
-from superbody.host.tracking.config import TrackerConfig
 from superbody.host.tracking.association import assign, median_colour_distance
+from superbody.host.tracking.config import TrackerConfig
+from superbody.host.tracking.tracker import Tracker
 
 S = 1_000_000_000  # ns per second
 T0 = 1_700_000_000 * S  # a realistic UNIX time

@@ -1,8 +1,7 @@
 """The simulator's detector statistics stay close to the real dev.json."""
 
-import pytest
-
 import numpy as np
+import pytest
 
 from superbody.edge import body
 from superbody.edge.site import load_site

@@ -5,7 +5,8 @@ from __future__ import annotations
 import copy
 import json
 import math
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import pytest
@@ -16,7 +17,6 @@ from superbody.edge.angles import wrap_angle
 from superbody.edge.body import LEFT_HIP, LEFT_SHOULDER, NOSE, NUM_KEYPOINTS, RIGHT_HIP, RIGHT_SHOULDER
 from superbody.edge.colour import HIST_BINS
 from superbody.edge.site import load_site
-from superbody.models.dataset_calibration import decompose_projection, normalised_dlt
 from superbody.models.data.wtf import (
     DatasetError,
     RawSample,
@@ -29,8 +29,9 @@ from superbody.models.data.wtf import (
     world_to_wtf,
     wtf_to_world,
 )
-
-from tests.conftest import DEV_JSON, WTF_SITE as SITE_TOML
+from superbody.models.dataset_calibration import decompose_projection, normalised_dlt
+from tests.conftest import DEV_JSON
+from tests.conftest import WTF_SITE as SITE_TOML
 
 
 def _forward(left: np.ndarray, right: np.ndarray) -> np.ndarray:

@@ -15,6 +15,7 @@ from superbody.edge.angles import wrap_angle
 from superbody.edge.site import load_site
 from superbody.host.estimation.analytic import AnalyticEstimator
 from superbody.host.estimation.graph import GraphSpec, floor_centre
+from superbody.models.data.wtf import TRUTH_OFFSET_M, load_wtf, truth_to_torso
 from superbody.models.evaluation.evaluate import (
     PREDICTIONS_HEADER,
     evaluate,
@@ -26,7 +27,6 @@ from superbody.models.evaluation.evaluate import (
     score,
     write_predictions_csv,
 )
-from superbody.models.data.wtf import TRUTH_OFFSET_M, load_wtf, truth_to_torso
 from tests.conftest import LAB_SITE, ROOT, WTF_SITE
 
 SITE = load_site(WTF_SITE)
@@ -47,8 +47,8 @@ def models(tmp_path_factory):
     """Untrained ONNX models: one for the wtf-apartment site, one for another site."""
     pytest.importorskip("torch")
     pytest.importorskip("onnx")
-    from superbody.models.training.export import export_onnx
     from superbody.models.nets import build_model
+    from superbody.models.training.export import export_onnx
 
     out = tmp_path_factory.mktemp("models")
     paths = {}

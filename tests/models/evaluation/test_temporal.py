@@ -19,10 +19,10 @@ from superbody.edge.site import load_site
 from superbody.host.aggregator import HostConfig
 from superbody.host.estimation.analytic import AnalyticEstimator
 from superbody.host.filtering.pose_filter import FilterConfig
+from superbody.models.data.wtf import TRUTH_OFFSET_M, to_samples
 from superbody.models.evaluation.evaluate import PREDICTIONS_HEADER, predict, score, write_predictions_csv
 from superbody.models.evaluation.temporal import SIGNATURE, observation_batches, replay, simulated_recording, view_stamps
 from superbody.models.evaluation.temporal_scores import jitter, latency_scan, replay_summary, truth_at, truth_track
-from superbody.models.data.wtf import TRUTH_OFFSET_M, to_samples
 from tests.conftest import ROOT, WTF_SITE
 
 SITE = load_site(WTF_SITE)

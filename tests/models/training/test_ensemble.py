@@ -53,9 +53,9 @@ def test_exported_ensemble_equals_combining_its_members_exported_alone(tmp_path)
     from superbody.edge.site import load_site
     from superbody.host.estimation.estimator import OnnxEstimator
     from superbody.host.estimation.graph import GraphSpec, floor_centre
-    from superbody.models.training.export import META_ENSEMBLE, export_onnx, load_onnx_model, read_metadata
-    from superbody.models.nets import build_model
     from superbody.models.data.simdata import SimDataConfig, generate
+    from superbody.models.nets import build_model
+    from superbody.models.training.export import META_ENSEMBLE, export_onnx, load_onnx_model, read_metadata
 
     site = load_site(WTF_SITE)
     spec = GraphSpec.for_site(site, geometry=True)

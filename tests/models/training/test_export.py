@@ -16,8 +16,8 @@ from superbody.edge.camera import project, world_to_camera  # noqa: E402
 from superbody.edge.messages.observation import PersonView  # noqa: E402
 from superbody.edge.site import Site, parse_site  # noqa: E402
 from superbody.host.estimation.graph import GraphBatch, GraphSpec, build_batch, floor_centre  # noqa: E402
-from superbody.models.training.export import KEEP_FP32, export_onnx, quantize_int8, read_metadata  # noqa: E402
 from superbody.models.nets import ARCHS, build_model, decode_std  # noqa: E402
+from superbody.models.training.export import KEEP_FP32, export_onnx, quantize_int8, read_metadata  # noqa: E402
 
 # fp32 ONNX vs PyTorch: max abs difference of the pose (metres, sin, cos).
 FP32_ATOL = 1e-4
