@@ -27,7 +27,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 from superbody.edge import transport
 from superbody.edge.angles import wrap_angle
@@ -153,6 +152,8 @@ class _Watcher:
             truth = np.array([[[st.x, st.y] for st in sts] for sts in states])  # (poses, people, 2)
             poses = np.array([[p.x, p.y] for p in arr.people])
             cost = np.linalg.norm(truth - poses[:, None], axis=2)
+            from scipy.optimize import linear_sum_assignment  # here: every superbody command imports this module
+
             rows, cols = linear_sum_assignment(cost)
             assigned = {r: c for r, c in zip(rows, cols) if cost[r, c] < _MATCH_GATE_M}
             s.rows = []
@@ -177,8 +178,10 @@ class _Watcher:
         with self.lock:
             s = self.score
             lines = [f"superbody demo  t={elapsed_s:6.1f} s  cameras alive: {','.join(s.cameras_alive_last) or '-'}  "
-                     f"pose arrays: {s.arrays}",
-                     f"{'id':>4} {'x m':>7} {'y m':>7} {'yaw deg':>8} {'cameras':<10} {'person':>6} {'err cm':>7} {'err deg':>8}"]
+                     f"pose arrays: {s.arrays}"]
+            if not self.host_up:  # the router, the cameras and the host (its model) start in a few seconds
+                lines.append("starting: waiting for the host's first pose array (router, cameras and the model load in a few seconds)")
+            lines.append(f"{'id':>4} {'x m':>7} {'y m':>7} {'yaw deg':>8} {'cameras':<10} {'person':>6} {'err cm':>7} {'err deg':>8}")
             for p, k, e_pos, e_yaw in s.rows:
                 lines.append(f"{p.id:>4} {p.x:7.2f} {p.y:7.2f} {math.degrees(p.yaw):8.1f} {','.join(p.cameras):<10} "
                              f"{'-' if k is None else k:>6} {e_pos * 100:7.1f} {math.degrees(e_yaw):8.1f}")
@@ -258,14 +261,16 @@ def run_demo(cfg: DemoConfig, stop: threading.Event | None = None) -> dict:
         print(f"superbody demo: router on {endpoint}, {len(site.cameras)} cameras and the host started; logs in {log_dir}", file=sys.stderr)
 
         watcher = _Watcher(site, World(site, cfg.people, cfg.seed, epoch_s=anchor * 1e-9), clock.now_ns())
+        tty = sys.stdout.isatty()
+        if cfg.table:  # at once: the processes take a few seconds to start and the host to load its model
+            print(("\x1b[2J\x1b[H" if tty else "") + watcher.table(0.0) + ("" if tty else "\n"), flush=True)
         conf = transport.session_config("peer", connect=[endpoint])
         with zenoh.open(conf) as session:
             subs = [session.declare_subscriber(transport.observation_key(site.name), watcher.on_observation),
                     session.declare_subscriber(transport.people_key(site.name), watcher.on_people)]
             start = clock.now_ns()
-            last_table = 0.0
+            last_table = time.monotonic()
             killed = False
-            tty = sys.stdout.isatty()
             while not stop.is_set():
                 elapsed = (clock.now_ns() - start) / 1e9
                 if cfg.duration_s is not None and elapsed >= cfg.duration_s:
