@@ -113,7 +113,7 @@ def run_host(
         token = session.liveliness().declare_token(transport.host_alive_key(site.name))
         outputs: list[Sink] = [ZenohSink(session, site.name), *sinks]
         live = session.liveliness().declare_subscriber(transport.camera_alive_key(site.name), on_alive, history=True)
-        status_pub = session.declare_publisher(transport.host_status_key(site.name), encoding=zenoh.Encoding.APPLICATION_JSON)
+        status_pub = session.declare_publisher(transport.host_status_key(site.name), encoding=host_status.zenoh_encoding())
         sub = session.declare_subscriber(transport.observation_key(site.name), on_sample)
         log.info("host for site %s: %d cameras, estimator %s, publishing on %s", site.name, len(site.cameras),
                  aggregator.estimator_name, transport.people_key(site.name))

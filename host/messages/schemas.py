@@ -45,9 +45,9 @@ MESSAGES: Final[dict[str, tuple[type, str, str, str]]] = {
         "Version 1 (still read by the reference decoder) is this without the per-person estimator. " + _INTEGERS_NOTE,
     ),
     "status": (
-        status.HostStatus, "superbody.host_status", "superbody host status",
-        "The host's periodic status on superbody/<site>/host/status (docs/status-schema.md). Unversioned; consumers "
-        "must ignore fields they do not know.",
+        status.HostStatus, f"{status.SCHEMA}/{status.VERSION}", f"{status.SCHEMA} version {status.VERSION}",
+        "The host's periodic status on superbody/<site>/host/status (docs/status-schema.md). It may gain fields without a "
+        "new version, so consumers must ignore fields they do not know.",
     ),
 }
 FILES: Final[dict[str, str]] = {name: f"{name}.schema.json" for name in MESSAGES}

@@ -7,15 +7,16 @@ The schema, for dashboards and alarms in any language, is in ``docs/status-schem
      "published": 431}
 
 ``latency_ms.p50`` and ``p99`` are ``null`` until the host has published a PoseArray that used a
-new observation. The status is not versioned: it may gain fields, and ``decode`` ignores fields
-it does not know. ``encode`` checks every value (a few comparisons: the host builds the status
+new observation. The status is version 1 of ``superbody.host_status`` (its Zenoh encoding says so,
+``ENCODING``, as every superbody message's does); it may gain fields without a new version, and
+``decode`` ignores fields it does not know. ``encode`` checks every value (a few comparisons: the host builds the status
 from its own counters) and writes compact JSON with msgspec, which never writes ``NaN``.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, Final
+from typing import TYPE_CHECKING, Annotated, Any, Final
 
 import msgspec
 from msgspec import Meta, Struct
@@ -23,7 +24,16 @@ from msgspec import Meta, Struct
 from superbody.edge.messages.payload import NAME_PATTERN, DecodeError, check_object, fail, join_path, parse_json
 from superbody.edge.site import NAME_RE
 
-__all__ = ["MAX_PAYLOAD_BYTES", "MAX_CAMERAS", "Latency", "HostStatus", "latency", "encode", "decode"]
+if TYPE_CHECKING:
+    import zenoh
+
+__all__ = ["SCHEMA", "VERSION", "ENCODING", "MAX_PAYLOAD_BYTES", "MAX_CAMERAS", "Latency", "HostStatus", "latency", "encode",
+           "decode", "zenoh_encoding"]
+
+SCHEMA: Final[str] = "superbody.host_status"
+VERSION: Final[int] = 1
+# Zenoh 1.x renders an Encoding as "<mime>;<schema>": this string equals str(zenoh_encoding()).
+ENCODING: Final[str] = f"application/json;{SCHEMA}/{VERSION}"
 
 MAX_CAMERAS: Final[int] = 64  # a site file holds at most 64 cameras
 MAX_PEOPLE: Final[int] = 64
@@ -43,7 +53,7 @@ class Latency(Struct, kw_only=True):
 
 
 class HostStatus(Struct, kw_only=True):
-    """The host's periodic status (docs/status-schema.md). Unversioned; consumers ignore fields they do not know."""
+    """The host's periodic status (docs/status-schema.md), version 1; consumers ignore fields they do not know."""
 
     cameras_alive: Annotated[list[Annotated[str, Meta(pattern=NAME_PATTERN)]],
                              Meta(max_length=MAX_CAMERAS, extra_json_schema={"uniqueItems": True},
@@ -136,3 +146,10 @@ def _validation_error(text: str) -> DecodeError:
         return DecodeError(join_path(field.removeprefix("$"), name), "missing", "is required")
     reason = "range" if any(op in message for op in (">=", "<=", "length", "matching")) else "type"
     return DecodeError(field.removeprefix("$") or "$", reason, message[0].lower() + message[1:])
+
+
+def zenoh_encoding() -> zenoh.Encoding:
+    """The ``zenoh.Encoding`` to put with each payload (``str()`` of it equals ``ENCODING``)."""
+    import zenoh  # lazily: the codec itself does not need Zenoh
+
+    return zenoh.Encoding.APPLICATION_JSON.with_schema(f"{SCHEMA}/{VERSION}")

@@ -22,14 +22,17 @@ from collections import Counter, deque
 from pathlib import Path
 from typing import BinaryIO
 
+from superbody.edge.messages import wire
 from superbody.edge.resources import json_schema, package_version
+from superbody.host.messages import pose as pose_msg
+from superbody.host.messages import status as host_status
 
 __all__ = ["Recorder", "message_kind", "record"]
 
 log = logging.getLogger("superbody.record")
 
 # Message kind -> the schema name written into the MCAP file (the payload's own "schema" field).
-SCHEMA_NAMES = {"observation": "superbody.observation", "people": "superbody.people", "status": "superbody.host_status"}
+SCHEMA_NAMES = {"observation": wire.SCHEMA, "people": pose_msg.SCHEMA, "status": host_status.SCHEMA}
 
 
 def message_kind(key: str) -> str | None:

@@ -117,10 +117,12 @@ def test_host_status_before_any_observation_is_strict_json() -> None:
     host = threading.Thread(target=lambda: run_host(transport.session_config("peer", connect=[], listen=[endpoint]), agg,
                                                     WorldClock(), stop, duration_s=30), daemon=True)
     payloads: list[bytes] = []
+    encodings: list[str] = []
     cv = threading.Condition()
 
     def on_status(sample) -> None:
         with cv:
+            encodings.append(str(sample.encoding))
             payloads.append(sample.payload.to_bytes())
             cv.notify_all()
 
@@ -137,3 +139,4 @@ def test_host_status_before_any_observation_is_strict_json() -> None:
     doc = _strict_loads(payloads[-1])
     assert doc["latency_ms"] == {"p50": None, "p99": None}
     assert hs.decode(payloads[-1]).cameras_total == len(site.cameras)
+    assert set(encodings) == {hs.ENCODING} == {"application/json;superbody.host_status/1"}  # named and versioned, as every message
