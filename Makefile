@@ -5,7 +5,7 @@ PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: demo test bench models clean blazepose soak fuzz
+.PHONY: demo test lint typecheck bench models clean blazepose soak fuzz
 
 # Runtime install (no torch): what the demo and a deployed host need.
 $(VENV)/.run-installed: pyproject.toml
@@ -44,13 +44,24 @@ $(BLAZEPOSE_VENV)/.installed: deploy/blazepose-requirements.txt
 
 blazepose: $(BLAZEPOSE_VENV)/.installed
 
-test: $(VENV)/.dev-installed $(BLAZEPOSE_VENV)/.installed
+test: lint typecheck $(BLAZEPOSE_VENV)/.installed
 	$(PY) -m pytest -q $(ARGS)
 
+# ruff's rules are in pyproject.toml ([tool.ruff]).
+lint: $(VENV)/.dev-installed
+	$(PY) -m ruff check .
+
+# mypy checks the packages under the names they install as (superbody.edge, .host, .models):
+# it cannot follow the editable install's import hook, so it reads a tree of links to them.
+typecheck: $(VENV)/.dev-installed
+	@mkdir -p build/typecheck/superbody
+	@for p in edge host models; do ln -sfn ../../../$$p build/typecheck/superbody/$$p; done
+	$(PY) -m mypy -p superbody.edge -p superbody.host -p superbody.models
+
 bench: $(VENV)/.dev-installed
-	$(PY) benchmarks/codec_bench.py
-	$(PY) benchmarks/model_bench.py
-	$(PY) benchmarks/host_bench.py --zenoh
+	$(PY) -m benchmarks.codec_bench
+	$(PY) -m benchmarks.model_bench
+	$(PY) -m benchmarks.host_bench --zenoh
 
 # Retrain the shipped models and rewrite models/MODEL_CARD.md (about 1 h on 2 cores, 62 min in December 2026; needs dev.json).
 models: $(VENV)/.dev-installed
@@ -59,11 +70,11 @@ models: $(VENV)/.dev-installed
 # Not in CI. The demo under load with a hostile phase, RSS sampled each minute (default 30 min,
 # 10 cameras x 10 people; e.g. make soak ARGS="--minutes 5 --cameras 6 --people 5").
 soak: $(VENV)/.dev-installed
-	$(PY) benchmarks/soak.py $(ARGS)
+	$(PY) -m benchmarks.soak $(ARGS)
 
 # Not in CI. 100,000 fuzzed Observation and PoseArray payloads through the decoders.
 fuzz: $(VENV)/.dev-installed
-	$(PY) benchmarks/fuzz.py $(ARGS)
+	$(PY) -m benchmarks.fuzz $(ARGS)
 
 clean:
 	rm -rf $(VENV) $(BLAZEPOSE_VENV) .pytest_cache .hypothesis

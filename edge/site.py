@@ -38,7 +38,7 @@ import re
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, cast, overload
 
 import numpy as np
 
@@ -111,6 +111,10 @@ def _number(value: Any, field: str, lo: float = -math.inf, hi: float = math.inf,
     return value
 
 
+@overload
+def _vector(value: Any, field: str, n: Literal[2], *, path: str = "", lo: float = -1e4, hi: float = 1e4) -> tuple[float, float]: ...
+@overload
+def _vector(value: Any, field: str, n: Literal[3], *, path: str = "", lo: float = -1e4, hi: float = 1e4) -> tuple[float, float, float]: ...
 def _vector(value: Any, field: str, n: int, *, path: str = "", lo: float = -1e4, hi: float = 1e4) -> tuple[float, ...]:
     if not isinstance(value, list) or len(value) != n:
         raise SiteError(f"{_where(path, field)} must be a list of {n} numbers, got {value!r}")
@@ -186,7 +190,7 @@ def _camera(c: Any, i: int, *, path: str) -> Camera:
             raise SiteError(f"{_where(path, f'{where}.look_at')} must not be straight above or below the camera") from None
     return Camera(
         id=cid, width=width, height=height, fps=fps, fx=fx, fy=fy, cx=cx, cy=cy, dist=dist_t,
-        position=position, rotation=tuple(tuple(float(v) for v in row) for row in R),
+        position=position, rotation=cast("tuple[tuple[float, float, float], ...]", tuple(tuple(float(v) for v in row) for row in R)),
     )
 
 

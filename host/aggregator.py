@@ -186,7 +186,11 @@ class Aggregator:
             self._last_input.pop(tr.id, None)
             self._poses.pop(tr.id, None)
         sets = self.tracker.view_sets(now_ns, self.config.freshness_s)
-        stamps_of = {tid: [self.tracker.track(tid).views[c].stamp_ns for c in views] for tid, views in sets.items()}
+        stamps_of: dict[int, list[int]] = {}
+        for tid, views in sets.items():
+            track = self.tracker.track(tid)
+            assert track is not None  # view_sets lists live tracks only
+            stamps_of[tid] = [track.views[c].stamp_ns for c in views]
         newest = {tid: max(st) for tid, st in stamps_of.items()}
         todo = [tid for tid in sets if newest[tid] > self._last_input.get(tid, -1)]
         if todo:

@@ -74,7 +74,7 @@ def run_host(
     cfg = aggregator.config
     pending: deque[tuple[bytes, str, int]] = deque()
     wake = threading.Condition()
-    counters = Counter()
+    counters: Counter[str] = Counter()
     queued_bytes = 0
     alive_events: deque[tuple[str, bool]] = deque()
     oversize: list[tuple[str, int]] = []  # (key, size) refused on Zenoh's thread, reported by the loop

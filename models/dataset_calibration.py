@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Final
+from typing import Final, cast
 
 import cv2
 import numpy as np
@@ -232,8 +232,8 @@ def fit_camera(
     camera = Camera(
         id=camera_id, width=width, height=height, fps=float(fps),
         fx=float(K[0, 0]), fy=float(K[1, 1]), cx=float(K[0, 2]), cy=float(K[1, 2]), dist=(),
-        position=tuple(float(v) for v in C),
-        rotation=tuple(tuple(float(v) for v in row) for row in R.T),  # world-from-camera
+        position=cast("tuple[float, float, float]", tuple(float(v) for v in C)),
+        rotation=cast("tuple[tuple[float, float, float], ...]", tuple(tuple(float(v) for v in row) for row in R.T)),  # world-from-camera
     )
     err = reprojection_errors(camera, points, pixels)
     return CameraFit(camera, skew, float(np.median(err)), float(err.max()), len(err))

@@ -29,6 +29,8 @@ Shapes: B graphs, S slots of Q = 18 nodes (body first), H heads of Dh features, 
 
 from __future__ import annotations
 
+from typing import cast
+
 import numpy as np
 import torch
 import torch.nn as nn
@@ -46,6 +48,10 @@ class FastGAT(nn.Module):
     Args:
         net: a trained GAT (any number of layers, "site" or "rays" spec).
     """
+
+    block: torch.Tensor  # buffers, registered in __init__
+    slot_keys: torch.Tensor
+    top_nodes: torch.Tensor
 
     def __init__(self, net: GAT):
         super().__init__()
@@ -89,7 +95,8 @@ class FastGAT(nn.Module):
         m = mask.unsqueeze(-1)  # (B, N, 1)
         m_top = m[:, top]  # (B, 1+S, 1) superbody, then the body nodes
         top_bias = ((1.0 - mask[:, :1] * m_top[:, :, 0]) * _NEG).reshape(-1, 1, 1, S + 1)  # (B, 1, 1, 1+S)
-        *inner, before, last = [None, *net.layers] if len(net.layers) == 1 else list(net.layers)
+        *inner, last = cast("list[GATLayer]", list(net.layers))  # GAT.layers holds GATLayers
+        before = inner.pop() if inner else None
         if before is None:  # one layer: the superbody's keys are all that is needed
             h_top = F.elu(net.embed(x[:, top])) * m_top  # (B, 1+S, D)
         else:

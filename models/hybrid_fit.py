@@ -34,7 +34,7 @@ import json
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Final
+from typing import Final, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -157,9 +157,9 @@ def fit_analytic(analytic: NDArray, pair: NDArray, truth: NDArray, cameras: NDAr
         m = ok & (cams == k)
         if m.sum() >= 5:
             rows[k - 1][:2] = robust_sigma(err[m])[:2]
-    table = tuple(tuple(float(max(v, 1e-3)) for v in r) for r in rows)
+    table = cast("tuple[tuple[float, float, float], ...]", tuple(tuple(float(max(v, 1e-3)) for v in r) for r in rows))
     return HybridCalibration(analytic_std=table, analytic_yaw_std_no_pair=float(min(max(yaw_no_pair, 0.05), 99.0)),
-                             analytic_bias=tuple(tuple(float(v) for v in b) for b in bias), source=source)
+                             analytic_bias=cast("tuple[tuple[float, float, float], ...]", tuple(tuple(float(v) for v in b) for b in bias)), source=source)
 
 
 def hybrid_poses(
@@ -205,7 +205,7 @@ def fit_trust(net: NDArray, net_std: NDArray, analytic: NDArray, pair: NDArray, 
     geo_std = calibration.analytic_sigmas(cams, pair)
     analytic = calibration.debias(analytic, cams)
     ok = np.isfinite(analytic).all(1) & np.isfinite(net).all(1)
-    rows = []
+    rows: list[tuple[float, float, float]] = []
     for k in (1, 2, 3):
         m = ok & (cams == k)
         if m.sum() < min_samples:
@@ -220,7 +220,7 @@ def fit_trust(net: NDArray, net_std: NDArray, analytic: NDArray, pair: NDArray, 
             diff = err[:, :, axis] - err[best[axis], :, axis]  # (T, n): each trust against the best
             se = diff.std(axis=1, ddof=1) / np.sqrt(m.sum()) * POSITION_SE
             row[axis] = TRUST_GRID[int(np.flatnonzero(mae[:, axis] <= mae[best[axis], axis] + se)[0])]
-        rows.append(tuple(row))
+        rows.append(cast("tuple[float, float, float]", tuple(row)))
     return replace(calibration, net_trust=tuple(rows))
 
 
@@ -232,7 +232,7 @@ def fit_calibration(net: NDArray, net_std: NDArray, analytic: NDArray, pair: NDA
     calibration)``, what ``write_calibration`` stores."""
     scale = fit_std_scale(net, net_std, truth, cameras)
     cal = replace(fit_analytic(analytic, pair, truth, cameras, source=source),
-                  net_bias=tuple(tuple(float(v) for v in row) for row in fit_net_bias(net, truth, cameras)))
+                  net_bias=cast("tuple[tuple[float, float, float], ...]", tuple(tuple(float(v) for v in row) for row in fit_net_bias(net, truth, cameras))))
     return scale, fit_trust(cal.debias(net, cameras, "net_bias"), scaled_std(net_std, scale, cameras), analytic, pair, truth, cameras, cal)
 
 

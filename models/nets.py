@@ -112,6 +112,8 @@ class PoseNet(nn.Module):
     """What every pose network shares: its graph spec, output normalisation and config."""
 
     arch: str = ""
+    head: nn.Module  # (B, D) pose embedding -> (B, 4) pose; set by each architecture
+    std_head: nn.Module  # (B, D) -> (B, 3) log-sigma; set by _with_std
 
     def __init__(self, spec: GraphSpec, scale: float = DEFAULT_SCALE, origin: tuple[float, float] = (0.0, 0.0)):
         super().__init__()

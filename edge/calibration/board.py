@@ -32,7 +32,7 @@ import math
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Final
+from typing import Final, cast
 
 import cv2
 import numpy as np
@@ -266,7 +266,7 @@ def detect_corners(image: NDArray[np.uint8], spec: BoardSpec, cam: Camera | None
     if ch_ids is None or len(ch_ids) == 0:
         empty = np.zeros((0, 2))
         return Corners(np.zeros(0, np.int32), empty, np.zeros((0, 3)), markers)
-    obj, img = board.matchImagePoints(ch_corners, ch_ids)
+    obj, img = board.matchImagePoints(ch_corners, ch_ids)  # type: ignore[call-overload]  # cv2 stubs: ChArUco corners come as one array, not a sequence
     return Corners(
         ids=ch_ids.reshape(-1).astype(np.int32),
         pixels=img.reshape(-1, 2).astype(np.float64),
@@ -342,7 +342,7 @@ def solve_board_pose(object_points: NDArray, pixels: NDArray, cam: Camera) -> Bo
         obj, img = obj[keep], img[keep]
         rvec, tvec, residuals = _fit_planar(obj, img, cam)
     rms = float(np.sqrt(np.mean(residuals**2)))
-    return BoardPose(R=cv2.Rodrigues(rvec)[0], t=tvec.reshape(3), reprojection_px=rms, corners=len(obj))
+    return BoardPose(R=cast("NDArray[np.float64]", cv2.Rodrigues(rvec)[0]), t=tvec.reshape(3), reprojection_px=rms, corners=len(obj))
 
 
 def camera_pose_in_world(

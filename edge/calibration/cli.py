@@ -20,6 +20,7 @@ import os
 import sys
 from dataclasses import replace
 from pathlib import Path
+from typing import cast
 
 __all__ = ["register"]
 
@@ -204,7 +205,8 @@ def _run_board(args: argparse.Namespace) -> int:
     rotation = [[float(v) for v in row] for row in fit.rotation]
     try:
         if args.out is not None:
-            new_cam = replace(cam, position=tuple(position), rotation=tuple(tuple(r) for r in rotation))
+            new_cam = replace(cam, position=cast("tuple[float, float, float]", tuple(position)),
+                              rotation=cast("tuple[tuple[float, float, float], ...]", tuple(tuple(r) for r in rotation)))
             new_site = replace(site, cameras=tuple(new_cam if c.id == cam.id else c for c in site.cameras))
             note = (
                 f"camera {cam.id}: pose from superbody calibrate board --image {args.image} --squares {args.squares} "
@@ -279,6 +281,7 @@ def _run_intrinsics(args: argparse.Namespace) -> int:
         doc = {"camera": cam.id, **doc}
     try:
         if args.out is not None:
+            assert cam is not None and site is not None  # --out needs --site and --camera (checked above)
             new_cam = replace(cam, fx=doc["fx"], fy=doc["fy"], cx=doc["cx"], cy=doc["cy"], dist=tuple(dist))
             new_site = replace(site, cameras=tuple(new_cam if c.id == cam.id else c for c in site.cameras))
             note = (

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import cast
 
 import cv2
 import numpy as np
@@ -39,7 +40,7 @@ def board_texture(spec: BoardSpec, px_per_m: float, margin_m: float = 0.0) -> tu
     m = round(margin_m * scale)
     if m:
         img = cv2.copyMakeBorder(img, m, m, m, m, cv2.BORDER_CONSTANT, value=255)
-    return img, scale
+    return cast("NDArray[np.uint8]", img), scale  # cv2 stubs: any MatLike; the board image is uint8
 
 
 def placement_in_front(cam: Camera, spec: BoardSpec, distance_m: float, yaw_offset: float = 0.0) -> tuple[tuple[float, float], float]:

@@ -130,7 +130,7 @@ class BlazePose:
         env = dict(os.environ, GLOG_minloglevel="2", TF_CPP_MIN_LOG_LEVEL="2", PYTHONNOUSERSITE="1")
         env.pop("PYTHONPATH", None)
         cmd = [self.python, str(WORKER)] + ([] if tracking else ["--static"])
-        self._proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._log, env=env)
+        self._proc: subprocess.Popen[bytes] | None = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._log, env=env)
         try:
             tag, _ = _REPLY.unpack(self._read(_REPLY.size, time.monotonic() + timeout_s, "load the model"))
             if tag != b"RDY0":
@@ -145,6 +145,7 @@ class BlazePose:
         return lines[-1] if lines else "no message"
 
     def _read(self, n: int, deadline: float, doing: str) -> bytes:
+        assert self._proc is not None and self._proc.stdout is not None  # open (callers check), stdout=PIPE
         fd = self._proc.stdout.fileno()
         buf = bytearray()
         while len(buf) < n:
@@ -167,6 +168,7 @@ class BlazePose:
         if self._proc is None:
             raise DetectorError("BlazePose worker is closed")
         h, w = image.shape[:2]
+        assert self._proc.stdin is not None  # stdin=PIPE
         try:
             self._proc.stdin.write(_HEADER.pack(b"IMG0", h, w))
             self._proc.stdin.write(np.ascontiguousarray(image).data)

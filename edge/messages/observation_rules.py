@@ -21,10 +21,10 @@ from superbody.edge.messages.payload import (
 __all__ = ["SCHEMA", "VERSION", "ENCODING", "MAX_PAYLOAD_BYTES", "MAX_PEOPLE", "HistogramMsg", "PersonMsg", "ObservationMsg"]
 
 
-SCHEMA: Final[str] = "superbody.observation"
+SCHEMA: Final = "superbody.observation"
 
 
-VERSION: Final[int] = 1
+VERSION: Final = 1
 
 
 # Zenoh 1.x renders an Encoding as "<mime>;<schema>": this string equals str(zenoh_encoding()).

@@ -118,6 +118,7 @@ class _DuplicateKeys(dict):
     """A parsed object that repeated a key; reported with its path once the path is known."""
 
     __slots__ = ("duplicate",)
+    duplicate: str  # the first repeated key
 
 
 class _Constant(Exception):
@@ -168,7 +169,7 @@ def parse_json(payload: Any, max_bytes: int) -> Any:
     if size > max_bytes:
         fail(ROOT, "oversize", f"is {size} bytes, more than the {max_bytes} allowed")
     if isinstance(payload, memoryview):
-        data = payload if payload.c_contiguous else payload.tobytes()
+        data: memoryview | bytes | bytearray = payload if payload.c_contiguous else payload.tobytes()
     elif isinstance(payload, (bytes, bytearray)):
         data = payload
     else:

@@ -34,7 +34,7 @@ from __future__ import annotations
 import json
 import math
 from itertools import chain
-from typing import TYPE_CHECKING, Any, Final
+from typing import TYPE_CHECKING, Any, Final, cast
 
 import msgspec
 import numpy as np
@@ -152,15 +152,15 @@ def _typed_decode(data: bytes, expected_site: str | None) -> Observation | None:
     if ((total != 0.0) & (np.abs(total - 1.0) > _HIST_SUM_TOL)).any():
         return None
     hist /= np.where(total > 0.0, total, 1.0)[:, None]  # hand consumers the documented invariant: sums to 1
-    kp32 = kp.astype(np.float32)
+    kp32: NDArray[np.float32] = kp.astype(np.float32)
     if (kp32[:, 2] <= 0.0).any():  # a positive score below float32's range (NaN rows compare False)
         return None
 
     kp32 = kp32.reshape(n, NUM_KEYPOINTS, 3)
     bbox32 = bbox.astype(np.float32)
     hist32 = hist.astype(np.float32).reshape(n, *HIST_BINS)
-    with_3d = [p for p in people if p.points3d]
-    rows3 = [r or _NAN3 for p in with_3d for r in p.points3d]
+    with_3d = [p.points3d for p in people if p.points3d]
+    rows3 = [r or _NAN3 for points3d in with_3d for r in points3d]
     xyz = iter(np.fromiter(_chain(rows3), np.float64, 3 * len(rows3)).astype(np.float32).reshape(-1, NUM_KEYPOINTS, 3))
     return Observation(
         site=msg.site, camera=msg.camera, seq=msg.seq, stamp_ns=msg.stamp_ns, width=width, height=height,
@@ -382,7 +382,7 @@ def _typed_encode(obs: Observation) -> bytes | None:
         score, score_r = kp[..., 2], np.round(kp[..., 2], 5)
         # 1e-5; a positive score too small for that stays positive rather than becoming invalid.
         wire_kp[..., 2] = np.where((score > 0) & (score_r < _MIN_SCORE), _MIN_SCORE, score_r)
-        missing = np.isnan(wire_kp).all(axis=2)  # (n, 17)
+        missing = cast("NDArray[np.bool_]", np.isnan(wire_kp).all(axis=2))  # (n, 17)
         u, v, s = wire_kp[..., 0], wire_kp[..., 1], wire_kp[..., 2]
         # A NaN or infinity in a present joint fails these comparisons.
         kp_ok = (u >= -w) & (u <= 2 * w) & (v >= -h) & (v <= 2 * h) & (s > 0) & (s <= 1)
@@ -398,14 +398,14 @@ def _typed_encode(obs: Observation) -> bytes | None:
         with_3d = [i for i, p in enumerate(people) if p.points3d is not None]
         points3d: dict[int, list] = {}
         if with_3d:
-            p3 = np.round(np.array([people[i].points3d for i in with_3d], dtype=np.float64), 4)  # 0.1 mm
+            p3 = cast("NDArray[np.float64]", np.round(np.array([people[i].points3d for i in with_3d], dtype=np.float64), 4))  # 0.1 mm; cast: numpy stubs pick float16
             if p3.shape != (len(with_3d), NUM_KEYPOINTS, 3):
                 return None
-            missing3 = np.isnan(p3).all(axis=2)
+            missing3 = cast("NDArray[np.bool_]", np.isnan(p3).all(axis=2))
             if not ((np.abs(p3) <= _MAX_COORD_M).all(axis=2) | missing3).all():
                 return None
             points3d = dict(zip(with_3d, _null_rows(p3, missing3)))
-        bins = list(HIST_BINS)
+        bins = HIST_BINS
         msg_people = [
             PersonMsg(keypoints=k, bbox=b, histogram=HistogramMsg(bins=bins, values=hv), points3d=points3d.get(i, UNSET))
             for i, (k, b, hv) in enumerate(zip(_null_rows(wire_kp, missing), wire_bbox.tolist(), wire_hist.tolist()))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import cv2
 import numpy as np
@@ -77,8 +78,8 @@ def _person_histogram(a: Appearance, kp: NDArray, light: Lighting, rng: np.rando
     h = sum(n for _, n in rows)
     patch = np.empty((h, 32, 3), dtype=np.float32)
     r = 0
-    for hsv, n in rows:
-        patch[r : r + n] = hsv
+    for colour, n in rows:
+        patch[r : r + n] = colour
         r += n
     # Background shows at the sides of the box.
     patch[:, :3] = light.background_hsv
@@ -87,5 +88,5 @@ def _person_histogram(a: Appearance, kp: NDArray, light: Lighting, rng: np.rando
     hsv[..., 0] = np.mod(hsv[..., 0] + light.hue_shift, 180)
     hsv[..., 1] = np.clip(hsv[..., 1] * light.sat_gain, 0, 255)
     hsv[..., 2] = np.clip(hsv[..., 2] * light.gain, 0, 255)
-    bgr = cv2.cvtColor(hsv.astype(np.uint8), cv2.COLOR_HSV2BGR)
+    bgr = cast("NDArray[np.uint8]", cv2.cvtColor(hsv.astype(np.uint8), cv2.COLOR_HSV2BGR))  # cv2 stubs: any MatLike
     return hs_histogram(bgr)

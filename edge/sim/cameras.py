@@ -10,6 +10,7 @@ that into Observations.
 from __future__ import annotations
 
 import math
+from typing import cast
 
 import cv2
 import numpy as np
@@ -196,6 +197,6 @@ def _spurious_view(cam: Camera, rng: np.random.Generator, light: Lighting, histo
     if histograms:
         bg = np.asarray(light.background_hsv, np.float32)
         hsv = np.clip(bg + rng.normal(size=(16, 16, 3)) * [6, 20, 20], 0, [179, 255, 255]).astype(np.uint8)
-        hist = hs_histogram(cv2.cvtColor(hsv, cv2.COLOR_HSV2BGR))
+        hist = hs_histogram(cast("NDArray[np.uint8]", cv2.cvtColor(hsv, cv2.COLOR_HSV2BGR)))  # cv2 stubs: any MatLike
     p3d = np.where(np.isnan(kp[:, :1]), np.nan, rng.uniform(1, 5, size=(body.NUM_KEYPOINTS, 3))).astype(np.float32) if depth else None
     return PersonView(keypoints=kp, bbox=_bbox(kp, cam), histogram=hist, points3d=p3d)

@@ -86,6 +86,8 @@ _CLEARANCE_M: Final = 0.6
 class _Planner:
     """Builds one person's plan an action at a time, keeping clear of the others' plans."""
 
+    start: NDArray  # (2,) where the person starts, and ends the plan
+
     def __init__(self, person: SimPerson, rng: np.random.Generator, free: _FreeSpace, others: list[_Planner]):
         self.rng, self.free, self.others = rng, free, others
         self.plan = _Plan()

@@ -233,7 +233,7 @@ def _nn_frame_type(dai, archive):
     return getattr(dai.ImgFrame.Type, name or "BGR888p", dai.ImgFrame.Type.BGR888p)
 
 
-def _request_nn_frames(dai, camera, size: tuple[int, int], frame_type, fps: float):
+def _request_nn_frames(dai, camera, size: tuple[int, int], frame_type, fps: float | None):
     """The camera output the NN runs on: ``size``, centre-cropped (square pixels kept).
 
     ``read_device_intrinsics`` requests the same output, so it sees the same intrinsics.

@@ -55,7 +55,7 @@ class VideoSource:
         self.skipped = 0
         if kind == "video" and not Path(str(target)).is_file():
             raise SourceError(f"{self.name}: no such file")
-        self._cap = cv2.VideoCapture(target) if kind == "webcam" else cv2.VideoCapture(str(target), cv2.CAP_FFMPEG)
+        self._cap: cv2.VideoCapture | None = cv2.VideoCapture(target) if kind == "webcam" else cv2.VideoCapture(str(target), cv2.CAP_FFMPEG)
         if not self._cap.isOpened():
             hint = {"video": "is it a video file?", "webcam": f"is /dev/video{target} there and free?",
                     "rtsp": "check the URL, the credentials and that the camera is reachable"}[kind]

@@ -65,8 +65,8 @@ def joints_3d(views: Mapping[str, PersonView], site: Site, joints: Sequence[int]
         if len(vis) == 0:
             continue
         origin, dirs = pixel_to_ray(view.keypoints[vis, :2].astype(np.float64), cam)
-        for j, d in zip(vis, dirs):
-            rays[j].append((origin, d))
+        for k, d in zip(vis, dirs):
+            rays[k].append((origin, d))
     out = np.full((body.NUM_KEYPOINTS, 3), np.nan)
     for j, rs in enumerate(rays):
         if len(rs) >= 2:

@@ -183,9 +183,10 @@ class OnnxEstimator:
         try:
             # [kx, ky, kyaw] for every person, or one such row per camera count 1, 2, 3+.
             scale = np.asarray(json.loads(self.metadata.get(META_STD_SCALE, "[1, 1, 1]")), dtype=np.float64)
-            self.std_scale = np.broadcast_to(scale, (3, 3)).copy() if scale.shape in ((3,), (3, 3)) else None
-            if self.std_scale is None or not (np.all(np.isfinite(self.std_scale)) and np.all(self.std_scale > 0)):
+            std_scale = np.broadcast_to(scale, (3, 3)).copy() if scale.shape in ((3,), (3, 3)) else None
+            if std_scale is None or not (np.all(np.isfinite(std_scale)) and np.all(std_scale > 0)):
                 raise ValueError
+            self.std_scale: NDArray[np.float64] = std_scale
         except (ValueError, TypeError):
             raise ModelMismatchError(f"{self.path}: metadata {META_STD_SCALE} must be 3 positive numbers or 3 rows of them "
                                      f"(cameras 1, 2, 3+), got {self.metadata.get(META_STD_SCALE)!r}") from None

@@ -46,6 +46,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -274,7 +275,7 @@ def build_batch(view_sets: Sequence[Mapping[str, PersonView]], site: Site, spec:
 
     # Per view: joints present, pixel coordinates of its 18 nodes (body first), scores.
     uv_j = kp[:, :, :2]  # (V, 17, 2)
-    vis = np.isfinite(uv_j).all(axis=2)  # (V, 17)
+    vis = cast("NDArray[np.bool_]", np.isfinite(uv_j).all(axis=2))  # (V, 17)
     n_vis = vis.sum(axis=1)  # (V,)
     uv_j = np.where(vis[:, :, None], uv_j, 0.0)  # (V, 17, 2)
     score_j = kp[:, :, 2]

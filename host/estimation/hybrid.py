@@ -27,7 +27,7 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Final, Literal
+from typing import Any, Final, Literal, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -100,12 +100,12 @@ class HybridCalibration:
     @classmethod
     def from_json(cls, text: str) -> HybridCalibration:
         d = json.loads(text)
-        return cls(analytic_std=tuple(tuple(float(v) for v in s) for s in d["analytic_std"]),
+        return cls(analytic_std=_float_rows(d["analytic_std"]),
                    analytic_yaw_std_no_pair=float(d.get("analytic_yaw_std_no_pair", 3.0)),
-                   net_trust=tuple(tuple(float(v) for v in s) for s in d.get("net_trust", ((1.0, 1.0, 1.0),) * 3)),
+                   net_trust=_float_rows(d.get("net_trust", ((1.0, 1.0, 1.0),) * 3)),
                    floor_margin_m=float(d.get("floor_margin_m", 0.5)),
-                   analytic_bias=tuple(tuple(float(v) for v in b) for b in d.get("analytic_bias", ((0.0, 0.0, 0.0),) * 3)),
-                   net_bias=tuple(tuple(float(v) for v in b) for b in d.get("net_bias", ((0.0, 0.0, 0.0),) * 3)), source=str(d.get("source", "")))
+                   analytic_bias=_float_rows(d.get("analytic_bias", ((0.0, 0.0, 0.0),) * 3)),
+                   net_bias=_float_rows(d.get("net_bias", ((0.0, 0.0, 0.0),) * 3)), source=str(d.get("source", "")))
 
     def trust(self, cameras: NDArray) -> NDArray[np.float64]:
         """(B, 3) the trust factors (x, y, yaw) for camera counts (B,)."""
@@ -124,6 +124,11 @@ class HybridCalibration:
         s = table[np.clip(np.asarray(cameras, int), 1, 3) - 1].copy()
         s[~np.asarray(pair, bool), 2] = self.analytic_yaw_std_no_pair
         return s
+
+
+def _float_rows(rows: Any) -> tuple[tuple[float, float, float], ...]:
+    """Parsed JSON rows as tuples of floats; ``HybridCalibration`` checks that they are 3 rows of 3."""
+    return cast("tuple[tuple[float, float, float], ...]", tuple(tuple(float(v) for v in r) for r in rows))
 
 
 def fuse(net: NDArray, net_std: NDArray, geo: NDArray, geo_std: NDArray, trust: NDArray | float = 1.0) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

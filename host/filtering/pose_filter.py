@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -144,7 +145,7 @@ class PoseFilter:
                 raise ValueError(f"PoseFilter.update: {name} must be finite, got {v!r}")
         if meas_std is None:
             c = self.config
-            std = (c.meas_std_xy_m, c.meas_std_xy_m, c.meas_std_yaw_rad)
+            std: tuple[float, ...] = (c.meas_std_xy_m, c.meas_std_xy_m, c.meas_std_yaw_rad)
         else:
             std = tuple(float(s) for s in meas_std)
             if len(std) != 3 or not all(math.isfinite(s) and s > 0 for s in std):
@@ -185,6 +186,7 @@ class PoseFilter:
         return self._pose(t_ns, self._x, self._P)
 
     def _pass_through(self, t_ns: int, x: float, y: float, yaw: float, R: NDArray) -> FilteredPose:
+        assert self._t is not None  # update() starts a filter without a state instead
         dt = (t_ns - self._t) * _NS
         old = self._x
         rates = old[3:]  # a repeated stamp keeps the previous rates
@@ -231,8 +233,8 @@ def update_many(
     if len(pose) != B or len(t_ns) != B:
         raise ValueError(f"update_many: {B} filters, {len(t_ns)} stamps and {len(pose)} poses must match")
     ms = np.full((B, 3), np.nan) if meas_std is None else np.asarray(meas_std, dtype=np.float64).reshape(B, 3)
-    good = (np.isfinite(ms) & (ms > 0)).all(axis=1).tolist()  # (B,) rows that are a sigma; else the default
-    finite = np.isfinite(pose).all(axis=1).tolist()
+    good = cast("NDArray[np.bool_]", (np.isfinite(ms) & (ms > 0)).all(axis=1)).tolist()  # (B,) rows that are a sigma; else the default
+    finite = cast("NDArray[np.bool_]", np.isfinite(pose).all(axis=1)).tolist()
     out: list[FilteredPose | None] = [None] * B
     batch: list[int] = []
     for i, f in enumerate(filters):
@@ -240,7 +242,7 @@ def update_many(
         if f.config.enabled and finite[i] and f._t is not None and f._t <= t and (t - f._t) * _NS <= f.config.reset_after_s:
             batch.append(i)
         else:
-            out[i] = f.update(t, float(pose[i, 0]), float(pose[i, 1]), float(pose[i, 2]), tuple(map(float, ms[i])) if good[i] else None)
+            out[i] = f.update(t, float(pose[i, 0]), float(pose[i, 1]), float(pose[i, 2]), cast("tuple[float, float, float]", tuple(map(float, ms[i]))) if good[i] else None)
     if batch:
         fs = [filters[i] for i in batch]
         std = ms[batch]  # (n, 3)
@@ -263,8 +265,8 @@ def predict_many(filters: Sequence[PoseFilter], t_ns: Sequence[int]) -> list[Fil
         raise ValueError(f"predict_many: {len(filters)} filters and {len(t_ns)} stamps must match")
     if any(f._t is None for f in filters):
         raise RuntimeError("predict_many: a filter has no measurement yet")
-    t = [max(int(ti), f._t) for f, ti in zip(filters, t_ns)]  # type: ignore[type-var]
-    batch = [i for i, f in enumerate(filters) if f.config.enabled and t[i] > f._t]  # type: ignore[operator]
+    t = [max(int(ti), cast(int, f._t)) for f, ti in zip(filters, t_ns)]  # every _t is set (checked above)
+    batch = [i for i, f in enumerate(filters) if f.config.enabled and t[i] > cast(int, f._t)]
     out: list[FilteredPose | None] = [None] * len(filters)
     if batch:
         x, P = _predict_many([filters[i] for i in batch], np.array([t[i] for i in batch], dtype=np.int64))

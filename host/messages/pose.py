@@ -33,6 +33,7 @@ import json
 import math
 import numbers
 import re
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any, Final
 
 import msgspec
@@ -142,7 +143,7 @@ def _typed_decode(data: bytes, expected_site: str | None) -> PoseArray | None:
             PersonPose(
                 id=p.id, x=p.x, y=p.y, yaw=math.pi if p.yaw == -math.pi else p.yaw,  # the same heading; keep (-pi, pi]
                 vx=p.vx, vy=p.vy, yaw_rate=p.yaw_rate, cov=cov[i], confidence=p.confidence, cameras=tuple(p.cameras),
-                stamp_ns=p.stamp_ns, views=p.views, estimator=p.estimator if msg.version >= 2 else top,
+                stamp_ns=p.stamp_ns, views=p.views, estimator=p.estimator if isinstance(p, PersonPoseMsg) else top,  # version 2 people carry their own
             )
             for i, p in enumerate(people)
         ),
@@ -255,7 +256,7 @@ def _ints_in(values: list, lo: int, hi: int) -> list[int] | None:
     return values if not values or (lo <= min(values) and max(values) <= hi) else None
 
 
-def _names_ok(names: list[str]) -> bool:
+def _names_ok(names: Sequence[str]) -> bool:
     """Every entry a camera id: one regex call for all of them, joined by NUL (which no id holds)."""
     if not names:
         return True

@@ -20,10 +20,10 @@ from superbody.edge.messages.payload import (
 __all__ = ["SCHEMA", "VERSION", "ENCODING", "MAX_PEOPLE", "MAX_SPEED", "MAX_CAMERAS", "MAX_PAYLOAD_BYTES", "PersonPoseMsgV1", "PersonPoseMsg", "PoseArrayMsgV1", "PoseArrayMsg"]
 
 
-SCHEMA: Final[str] = "superbody.people"
+SCHEMA: Final = "superbody.people"
 
 
-VERSION: Final[int] = 2  # what the encoder writes
+VERSION: Final = 2  # what the encoder writes
 
 
 READ_VERSIONS: Final[tuple[int, ...]] = (1, 2)  # what the decoder reads (1: no per-person estimator)

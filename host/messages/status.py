@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Annotated, Any, Final
 import msgspec
 from msgspec import Meta, Struct
 
-from superbody.edge.messages.payload import NAME_PATTERN, DecodeError, check_object, fail, join_path, parse_json
+from superbody.edge.messages.payload import NAME_PATTERN, DecodeError, Reason, check_object, fail, join_path, parse_json
 from superbody.edge.site import NAME_RE
 
 if TYPE_CHECKING:
@@ -144,7 +144,7 @@ def _validation_error(text: str) -> DecodeError:
     if message.startswith("Object missing required field `"):
         name = message.split("`")[1]
         return DecodeError(join_path(field.removeprefix("$"), name), "missing", "is required")
-    reason = "range" if any(op in message for op in (">=", "<=", "length", "matching")) else "type"
+    reason: Reason = "range" if any(op in message for op in (">=", "<=", "length", "matching")) else "type"
     return DecodeError(field.removeprefix("$") or "$", reason, message[0].lower() + message[1:])
 
 

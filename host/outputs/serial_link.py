@@ -450,6 +450,7 @@ class SerialLink:
         if self._owned:
             port, self.port = self.port, None
             try:
+                assert port is not None  # send() only writes to an open port
                 port.close()
             except Exception:  # closing a dead port may fail too; it is gone either way
                 pass

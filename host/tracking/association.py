@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -14,7 +14,7 @@ from scipy.sparse.csgraph import connected_components
 
 from superbody.edge.colour import bhattacharyya_matrix
 
-__all__ = ["Match", "assign", "median_colour_distance", "duplicate_views", "DUPLICATE_SPREAD"]
+__all__ = ["Match", "FrameViews", "assign", "median_colour_distance", "duplicate_views", "DUPLICATE_SPREAD"]
 
 # Two skeletons of one frame whose shared joints lie on average within this fraction of the
 # skeleton's height of each other are one detection: people standing side by side are a body
@@ -50,6 +50,19 @@ class Match:
     status: Literal["matched", "created", "ignored"]
     colour_distance: float = math.nan
     ground_distance_m: float = math.nan
+
+
+class FrameViews(NamedTuple):
+    """One frame's usable views (K of its N people), as ``Tracker._measure`` finds them."""
+
+    idx: NDArray[np.intp]  # (K,) indices into the frame's people
+    n_joints: NDArray[np.intp]  # (N,) detected joints of every person of the frame
+    ground: NDArray[np.float64]  # (K, 2) ground points
+    sigma: NDArray[np.float64]  # (K,) their 1-sigma, NaN: none
+    has_ground: NDArray[np.bool_]  # (K,)
+    hists: NDArray[np.float32]  # (K, B) flattened histograms
+    has_colour: NDArray[np.bool_]  # (K,) False for an empty histogram
+    amps: NDArray[np.float64]  # (K, B) their amplitudes (association.py)
 
 
 def assign(cost: NDArray, feasible: NDArray) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
@@ -148,7 +161,7 @@ def duplicate_views(keypoints: NDArray, n_joints: NDArray) -> NDArray[np.bool_]:
     mean_d = d.sum(axis=2) / np.maximum(n_shared, 1)  # (K, K)
     close = (n_shared >= _MIN_SHARED_JOINTS) & (mean_d <= DUPLICATE_SPREAD * np.maximum(height[:, None], height[None, :]))
     _, group = connected_components(close, directed=False)  # (K,) group of each skeleton
-    best = {}
+    best: dict[int, int] = {}
     for i in np.argsort(-np.asarray(n_joints), kind="stable").tolist():
         best.setdefault(int(group[i]), i)
     keep = np.zeros(k, dtype=bool)

@@ -13,8 +13,8 @@ __all__ = ["TrackerConfig"]
 
 def _check(name: str, value: object, lo: float, hi: float, *, lo_open: bool = False, integer: bool = False) -> None:
     kind = int if integer else (int, float)
-    ok = isinstance(value, kind) and not isinstance(value, bool) and math.isfinite(value)
-    ok = ok and (lo < value if lo_open else lo <= value) and value <= hi
+    ok = (isinstance(value, kind) and not isinstance(value, bool) and math.isfinite(value)
+          and (lo < value if lo_open else lo <= value) and value <= hi)
     if not ok:
         what = "an integer" if integer else "a number"
         raise ValueError(f"TrackerConfig.{name} must be {what} in {'(' if lo_open else '['}{lo}, {hi}], got {value!r}")

@@ -116,7 +116,7 @@ def ground_points(
         # One batch of rays; where each level's ray meets its plane z = h.
         flat = uv.reshape(-1, 2)  # (N (L + 1), 2)
         usable = ~np.isnan(flat).any(axis=1)
-        d = np.full((len(flat), 3), np.nan)
+        d: NDArray[np.float64] = np.full((len(flat), 3), np.nan)
         if usable.any():
             d[usable] = pixel_to_ray(flat[usable], cam)[1]
         d = d.reshape(n, n_levels + 1, 3)  # (N, L + 1, 3)

@@ -4,7 +4,7 @@ association gate follows. The maths is ``host.filtering.kalman``'s per-axis step
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -60,7 +60,7 @@ def update_positions(x: NDArray, P: NDArray, z: NDArray, R: NDArray) -> tuple[ND
 def fuse_positions(tracks: list[Track], xy: NDArray, sigma: NDArray, t_ns: int | NDArray, accel_std_mps2: float) -> None:
     """Kalman-update the positions of ``tracks`` with floor points (B, 2) of 1-sigma (B,), seen
     at ``t_ns`` (one time, or (B,) one per track)."""
-    stamps = [int(t_ns)] * len(tracks) if np.ndim(t_ns) == 0 else [int(v) for v in t_ns]  # (B,)
+    stamps = [int(t_ns)] * len(tracks) if np.ndim(t_ns) == 0 else [int(v) for v in cast("NDArray", t_ns)]  # (B,)
     rows: list[int] = []  # tracks with a state: predicted, then updated in one batch
     for j, tr in enumerate(tracks):
         if tr._kf_t is None:  # first point: the velocity is unknown
@@ -77,11 +77,11 @@ def fuse_positions(tracks: list[Track], xy: NDArray, sigma: NDArray, t_ns: int |
     t_old = [stamps[j] for j in rows]
     x = np.array([tr._kf_x for tr in old])  # (B, 2, 2)
     P = np.array([tr._kf_P for tr in old])  # (B, 2, 2)
-    dt = np.array([t - tr._kf_t for t, tr in zip(t_old, old, strict=True)], dtype=np.float64) / _NS_PER_S  # (B,)
+    dt = np.array([t - cast(int, tr._kf_t) for t, tr in zip(t_old, old, strict=True)], dtype=np.float64) / _NS_PER_S  # (B,)
     x, P = predict_positions(x, P, np.maximum(dt, 0.0), accel_std_mps2)
     # A point older than the state (another camera's frame came late) is applied at the state's
     # time, with the distance the person may have walked since as extra noise.
     R = sigma**2 + (INIT_SPEED_STD * np.minimum(dt, 0.0)) ** 2  # (B,)
     x, P = update_positions(x, P, xy, R)
     for j, tr in enumerate(old):
-        tr._kf_x, tr._kf_P, tr._kf_t = x[j], P[j], max(tr._kf_t, t_old[j])
+        tr._kf_x, tr._kf_P, tr._kf_t = x[j], P[j], max(cast(int, tr._kf_t), t_old[j])

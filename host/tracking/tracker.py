@@ -53,14 +53,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Final, NamedTuple
+from typing import Final, NamedTuple, cast
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from superbody.edge.messages.observation import Observation, PersonView
 from superbody.edge.site import Site
-from superbody.host.tracking.association import Match, _amplitudes, _median_over_history, assign, duplicate_views
+from superbody.host.tracking.association import FrameViews, Match, _amplitudes, _median_over_history, assign, duplicate_views
 from superbody.host.tracking.config import TrackerConfig
 from superbody.host.tracking.ground import ground_points
 from superbody.host.tracking.motion import _NS_PER_S, fuse_positions, predict_positions
@@ -85,19 +85,6 @@ class _Order(NamedTuple):
     seq: int  # its sequence number
     back_seq: int | None = None  # the last frame refused as seq_backwards since: its seq ...
     back_ns: int = 0  # ... and stamp
-
-
-class _Views(NamedTuple):
-    """One frame's usable views (K of its N people), as ``Tracker._measure`` finds them."""
-
-    idx: NDArray[np.intp]  # (K,) indices into the frame's people
-    n_joints: NDArray[np.intp]  # (N,) detected joints of every person of the frame
-    ground: NDArray[np.float64]  # (K, 2) ground points
-    sigma: NDArray[np.float64]  # (K,) their 1-sigma, NaN: none
-    has_ground: NDArray[np.bool_]  # (K,)
-    hists: NDArray[np.float32]  # (K, B) flattened histograms
-    has_colour: NDArray[np.bool_]  # (K,) False for an empty histogram
-    amps: NDArray[np.float64]  # (K, B) their amplitudes (association.py)
 
 
 class _Lost(NamedTuple):
@@ -236,7 +223,7 @@ class Tracker:
         st["views"] += len(obs.people)
         return True
 
-    def _measure(self, obs: Observation) -> _Views:
+    def _measure(self, obs: Observation) -> FrameViews:
         """The frame's views with enough joints, and their ground points and colours."""
         st, cfg = self.stats, self.config
         n = len(obs.people)
@@ -249,16 +236,16 @@ class Tracker:
         st["duplicate_views"] += int(copies.sum())
         idx = idx[~copies]
         if not len(idx):
-            return _Views(idx, n_joints, np.zeros((0, 2)), np.zeros(0), np.zeros(0, bool), np.zeros((0, _BINS), np.float32),
+            return FrameViews(idx, n_joints, np.zeros((0, 2)), np.zeros(0), np.zeros(0, bool), np.zeros((0, _BINS), np.float32),
                           np.zeros(0, bool), np.zeros((0, _BINS)))
         bboxes = np.array([obs.people[i].bbox for i in idx])  # (K, 4)
         ground, sigma, _ = ground_points(kps[idx], bboxes, self._cameras[obs.camera])  # (K, 2), (K,)
         has_ground = ~np.isnan(sigma)  # (K,)
         st["no_ground_point"] += int((~has_ground).sum())
         hists = np.array([obs.people[i].histogram.reshape(-1) for i in idx])  # (K, B)
-        return _Views(idx, n_joints, ground, sigma, has_ground, hists, hists.sum(axis=1) > 0, _amplitudes(hists))
+        return FrameViews(idx, n_joints, ground, sigma, has_ground, hists, hists.sum(axis=1) > 0, _amplitudes(hists))
 
-    def _update_matched(self, obs: Observation, t: int, views: _Views, tracks: list[Track], rows: NDArray, cols: NDArray,
+    def _update_matched(self, obs: Observation, t: int, views: FrameViews, tracks: list[Track], rows: NDArray, cols: NDArray,
                         colour_d: NDArray, geo_d: NDArray, matches: list[Match | None]) -> list[tuple[Track, int]]:
         """Apply each matched view to its track; returns the (track, view row) pairs to fuse."""
         fused: list[tuple[Track, int]] = []
@@ -270,7 +257,7 @@ class Tracker:
             self.stats["matched"] += 1
         return fused
 
-    def _create(self, obs: Observation, t: int, views: _Views, tracks: list[Track], rows: NDArray, cols: NDArray,
+    def _create(self, obs: Observation, t: int, views: FrameViews, tracks: list[Track], rows: NDArray, cols: NDArray,
                 near: NDArray, matches: list[Match | None]) -> list[tuple[Track, int]]:
         """Start a candidate from each view no track took, where the rules allow (module
         docstring); returns the (track, view row) pairs to fuse."""
@@ -306,11 +293,11 @@ class Tracker:
             self._tracks[tr.id] = tr
             st["new_candidates"] += 1
             self._apply(tr, obs.camera, t, obs.people[i], views.hists[r], views.amps[r], views.has_colour[r])
-            fused.append((tr, r))
+            fused.append((tr, int(r)))
             matches[i] = Match(i, tr.id, "created")
         return fused
 
-    def _fuse(self, fused: list[tuple[Track, int]], views: _Views, t: int) -> None:
+    def _fuse(self, fused: list[tuple[Track, int]], views: FrameViews, t: int) -> None:
         """The ground points of the views applied to their tracks' position filters."""
         fused = [(tr, r) for tr, r in fused if views.has_ground[r]]
         if fused:
@@ -358,7 +345,7 @@ class Tracker:
                 known = [tracks[j] for j in np.flatnonzero(has_pos)]
                 x, P = predict_positions(
                     np.array([tr._kf_x for tr in known]), np.array([tr._kf_P for tr in known]),
-                    np.array([(t - tr._kf_t) / _NS_PER_S for tr in known]), cfg.accel_std_mps2,
+                    np.array([(t - cast(int, tr._kf_t)) / _NS_PER_S for tr in known]), cfg.accel_std_mps2,
                 )
                 pos[has_pos], pos_std[has_pos] = x[:, 0, :], np.sqrt(P[:, 0, 0])
             geo_d = np.linalg.norm(ground[:, None, :] - pos[None, :, :], axis=2)  # (K, M)
@@ -449,7 +436,7 @@ class Tracker:
         fuse_positions([tr], xy[None], np.array([float(std_m)]), int(stamp_ns), self.config.accel_std_mps2)
         return True
 
-    def set_positions(self, track_ids: Sequence[int], xy: NDArray, stamps_ns: Sequence[int], std_m: float = 0.1) -> NDArray[np.bool_]:
+    def set_positions(self, track_ids: Sequence[int], xy: ArrayLike, stamps_ns: Sequence[int], std_m: float = 0.1) -> NDArray[np.bool_]:
         """``set_position`` for many tracks at once (one Kalman batch): ids (B,), xy (B, 2), stamps (B,).
 
         Returns:

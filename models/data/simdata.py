@@ -20,6 +20,7 @@ import os
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 from tqdm import tqdm
@@ -187,7 +188,7 @@ def random_site(rng: np.random.Generator, name: str = "random") -> Site:
         cams.append(Camera(
             id=f"c{i}", width=width, height=height, fps=15.0, fx=f, fy=f * float(rng.uniform(0.98, 1.02)),
             cx=width / 2 + float(rng.normal(0, 5)), cy=height / 2 + float(rng.normal(0, 5)),
-            dist=(), position=tuple(map(float, pos)), rotation=tuple(tuple(map(float, r)) for r in R),
+            dist=(), position=cast("tuple[float, float, float]", tuple(map(float, pos))), rotation=cast("tuple[tuple[float, float, float], ...]", tuple(tuple(map(float, r)) for r in R)),
         ))
     obstacles = []
     for k in range(int(rng.integers(0, 3))):
@@ -220,7 +221,7 @@ def save_samples(path: str | Path, samples: list[Sample], camera_ids: tuple[str,
                   truth=np.array([s.truth for s in samples]).reshape(S, 3), stamp_ns=np.array([s.stamp_ns for s in samples], np.int64))
     if has3d:
         arrays["points3d"] = p3
-    np.savez_compressed(path, **arrays)
+    np.savez_compressed(path, **arrays)  # type: ignore[arg-type]  # mypy also matches **arrays against allow_pickle: bool
 
 
 def load_samples(path: str | Path) -> list[Sample]:

@@ -159,7 +159,7 @@ def world_to_wtf(x: ArrayLike, y: ArrayLike, z: ArrayLike) -> tuple[NDArray[np.f
     return x * 1000.0, z * 1000.0, y * 1000.0
 
 
-def from_dataset_frame(x_mm: ArrayLike, z_mm: ArrayLike, angle: ArrayLike) -> tuple[NDArray[np.float64], ...]:
+def from_dataset_frame(x_mm: ArrayLike, z_mm: ArrayLike, angle: ArrayLike) -> tuple[NDArray[np.float64] | float, ...]:
     """A dataset floor pose (X mm, Z mm, angle rad) to REP-103 ``(x, y, yaw)``.
 
     Returns:
@@ -170,7 +170,7 @@ def from_dataset_frame(x_mm: ArrayLike, z_mm: ArrayLike, angle: ArrayLike) -> tu
     return x_mm / 1000.0, z_mm / 1000.0, wrap_angle(angle + np.pi / 2)
 
 
-def to_dataset_frame(x: ArrayLike, y: ArrayLike, yaw: ArrayLike) -> tuple[NDArray[np.float64], ...]:
+def to_dataset_frame(x: ArrayLike, y: ArrayLike, yaw: ArrayLike) -> tuple[NDArray[np.float64] | float, ...]:
     """A REP-103 floor pose to the dataset's ``(x_mm, z_mm, angle)``, angle in (-pi, pi]."""
     x, y, yaw = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (x, y, yaw)))
     return x * 1000.0, y * 1000.0, wrap_angle(yaw - np.pi / 2)

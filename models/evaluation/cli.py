@@ -138,8 +138,8 @@ def _run_coverage(args: argparse.Namespace) -> int:
         doc = {"estimator": name, "train_samples": len(train), "train_inside_floor": float(inside), "test_samples": len(test),
                "position_mm": float(np.mean(pos[ok])), "yaw_deg": float(np.mean(yaw[ok])), "by_cameras": by,
                "cells": {"x_edges": cells["x_edges"].tolist(), "y_edges": cells["y_edges"].tolist(),
-                         "position_mm": np.where(np.isfinite(p), np.round(p, 1), None).tolist(),
-                         "yaw_deg": np.where(np.isfinite(cells["yaw_deg"]), np.round(cells["yaw_deg"], 2), None).tolist(),
+                         "position_mm": np.asarray(np.where(np.isfinite(p), np.round(p, 1), None)).tolist(),
+                         "yaw_deg": np.asarray(np.where(np.isfinite(cells["yaw_deg"]), np.round(cells["yaw_deg"], 2), None)).tolist(),
                          "count": cells["count"].astype(int).tolist()},
                "images": [str(x) for x in paths]}
         Path(args.json_out).write_text(json.dumps(doc, indent=1) + "\n")

@@ -59,7 +59,7 @@ def _draw_site(ax, site: Site) -> None:
     poly = np.asarray(site.floor + (site.floor[0],))
     ax.plot(poly[:, 0], poly[:, 1], "k-", lw=1.2, label="floor")
     for cam in site.cameras:
-        d = cam.R[:2, 2] / max(np.linalg.norm(cam.R[:2, 2]), 1e-9)
+        d = cam.R[:2, 2] / max(float(np.linalg.norm(cam.R[:2, 2])), 1e-9)
         ax.plot(*cam.t[:2], "rv", ms=8)
         ax.annotate(f"cam {cam.id}", cam.t[:2], textcoords="offset points", xytext=(4, 4), fontsize=8, color="r")
         ax.arrow(cam.t[0], cam.t[1], 0.6 * d[0], 0.6 * d[1], color="r", width=0.02)

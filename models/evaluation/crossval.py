@@ -136,7 +136,7 @@ def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = N
     std8 = np.full((len(samples), 3), np.nan)
     fold_of = np.zeros(len(samples), np.int64)
     info = []
-    fp32_models: dict[int, str] = {}  # fold -> its exported fp32 model (temporal)
+    fp32_models: dict[int, Path] = {}  # fold -> its exported fp32 model (temporal)
     with tempfile.TemporaryDirectory(prefix="superbody-crossval-") as tmp:
         for k, (held, excluded) in enumerate(blocks):
             fold_cfg = dataclasses.replace(cfg, real_exclude=None, real_holdout=tuple(int(i) for i in excluded), seed=cfg.seed + k)
@@ -158,9 +158,9 @@ def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = N
             models_out.mkdir(parents=True, exist_ok=True)
             for k, path in fp32_models.items():  # each now carries its calibration from the other folds
                 shutil.copyfile(path, models_out / f"fold{k}.fp32.onnx")
-    scored = {"model": pred, "hybrid": live.get("hybrid"), "model int8": pred8 if int8 else None, "model temporal": live.get("temporal_network"),
-              "hybrid temporal": live.get("temporal_hybrid"), "analytic": baseline, "analytic temporal": live.get("temporal_analytic")}
-    scored = {name: p for name, p in scored.items() if p is not None}  # what was run, in table order
+    candidates = {"model": pred, "hybrid": live.get("hybrid"), "model int8": pred8 if int8 else None, "model temporal": live.get("temporal_network"),
+                  "hybrid temporal": live.get("temporal_hybrid"), "analytic": baseline, "analytic temporal": live.get("temporal_analytic")}
+    scored = {name: p for name, p in candidates.items() if p is not None}  # what was run, in table order
     out = {"folds": info, "reports": score(samples, scored, offset), "truth_offset_m": offset,
            "predictions": pred, "std": std, "analytic": baseline, "fold": fold_of, "split": split,
            "truth": np.array([s.truth for s in samples]), "views": np.array([len(s.views) for s in samples]), **live}
@@ -170,7 +170,7 @@ def crossvalidate(cfg: TrainConfig, folds: int, truth_offset_m: float | None = N
 
 
 def _temporal(raw, samples, site, pred: NDArray, std: NDArray, analytic: NDArray, pair: NDArray, fold_of: NDArray,
-              fp32_models: dict[int, str], offset: float) -> dict:
+              fp32_models: dict[int, Path], offset: float) -> dict:
     """The live system on the cross-validation (module docstring): per fold, its fp32 model with the
     hybrid calibration of the other folds, the whole recording replayed through the aggregator,
     the fold's samples taken from what it publishes."""

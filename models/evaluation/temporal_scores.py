@@ -5,7 +5,7 @@ the truth)."""
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Final
+from typing import Final, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -39,7 +39,7 @@ def jitter(pred: NDArray, truth: NDArray, truth_offset_m: float = 0.0, mask: NDA
     truth = np.asarray(truth, dtype=np.float64).reshape(-1, 3)
     if len(pred) != len(truth):
         raise ValueError(f"jitter: {len(pred)} predictions for {len(truth)} truths")
-    ok = np.isfinite(pred).all(axis=1) & np.isfinite(truth).all(axis=1)
+    ok = cast("NDArray[np.bool_]", np.isfinite(pred).all(axis=1) & np.isfinite(truth).all(axis=1))
     if mask is not None:
         ok &= np.asarray(mask, dtype=bool).reshape(-1)
     err = torso_to_truth(np.where(ok[:, None], pred, 0.0), truth_offset_m) - truth  # (N, 3)
@@ -126,7 +126,7 @@ def latency_scan(
     lags = [int(v) for v in lags_ms]
     if not lags:
         raise ValueError("latency_scan: no lags to try")
-    ok = np.isfinite(pred).all(axis=1)
+    ok = cast("NDArray[np.bool_]", np.isfinite(pred).all(axis=1))
     mean_t = np.array([np.mean([int(t) for t in st.values()]) for st in stamps], dtype=np.float64)
     cams = np.array([len(st) for st in stamps])
     point = torso_to_truth(np.where(ok[:, None], pred, 0.0), truth_offset_m)  # (N, 3)

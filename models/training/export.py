@@ -91,6 +91,10 @@ class _ExportedPose(nn.Module):
     and its 1-sigma (B, 3) (x, y metres, yaw radians). With ``fast``, a GAT runs as
     ``models.fast_gat.FastGAT`` (same outputs, a fraction of the work)."""
 
+    gain: torch.Tensor  # buffers, registered in __init__
+    offset: torch.Tensor
+    std_gain: torch.Tensor
+
     def __init__(self, net: PoseNet, fast: bool = False):
         super().__init__()
         self.net = net
@@ -156,7 +160,7 @@ def read_metadata(path: str | Path) -> dict[str, str]:
 def _declare_all_inputs(proto: onnx.ModelProto, spec: GraphSpec) -> None:
     """Keep the (x, adj, mask) interface for models that ignore an input (the MLP's adj):
     the exporter drops unused inputs, onnxruntime accepts declared-but-unused ones."""
-    shapes = {
+    shapes: dict[str, list[str | int]] = {
         "x": ["batch", spec.num_nodes, spec.num_features],
         "adj": ["batch", spec.num_relations, spec.num_nodes, spec.num_nodes],
         "mask": ["batch", spec.num_nodes],

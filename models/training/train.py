@@ -29,6 +29,7 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -38,6 +39,11 @@ from superbody.edge.angles import wrap_angle
 from superbody.edge.site import Site, load_site
 from superbody.host.estimation.graph import GraphBatch, GraphSpec, adjacency_template, build_batch, floor_centre, masked_adjacency
 from superbody.models.data.samples import Sample
+
+if TYPE_CHECKING:
+    import torch
+
+    from superbody.models.nets import PoseNet
 
 __all__ = ["TrainConfig", "TrainResult", "train", "prepare", "view_subsets"]
 
@@ -89,6 +95,8 @@ class TrainConfig:
             raise ValueError(f"variant must be 'site' or 'rays', got {self.variant!r}")
         if self.random_sites and self.variant != "rays":
             raise ValueError("random_sites needs variant 'rays' (a 'site' model is tied to its site's cameras)")
+        lo: float  # integer bounds first, then float ones
+        hi: float
         for name, lo, hi in (("sim_samples", 0, 5_000_000), ("random_sites", 0, 10_000), ("max_views", 1, 16), ("real_repeat", 1, 1000),
                              ("real_subset_repeat", 0, 1000), ("epochs", 1, 10_000), ("batch_size", 1, 65_536), ("patience", 1, 10_000), ("threads", 1, 256)):
             v = getattr(self, name)
@@ -113,7 +121,7 @@ class TrainConfig:
 class TrainResult:
     """What a run produced."""
 
-    model: object  # models.nets.PoseNet
+    model: PoseNet
     spec: GraphSpec
     history: list[dict]
     best_epoch: int
@@ -180,7 +188,7 @@ def _datasets(cfg: TrainConfig, site: Site, spec: GraphSpec, model, progress: bo
 def view_subsets(samples: list[Sample]) -> list[Sample]:
     """Every proper, non-empty subset of each sample's views, as samples with the same truth
     (a sample seen by k cameras gives 2^k - 2 of them; a single-view sample gives none)."""
-    out = []
+    out: list[Sample] = []
     for s in samples:
         cams = sorted(s.views)
         for k in range(1, len(cams)):
@@ -236,7 +244,7 @@ def train(cfg: TrainConfig, progress: bool = True) -> TrainResult:
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     steps_per_epoch = max(1, math.ceil(len(tr) / cfg.batch_size))
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=cfg.lr, total_steps=cfg.epochs * steps_per_epoch, pct_start=0.1)
-    best = (math.inf, -1, None)
+    best: tuple[float, int, dict[str, torch.Tensor] | None] = (math.inf, -1, None)  # (val loss, epoch, state)
     history: list[dict] = []
     stale = 0
     for epoch in range(cfg.epochs):
@@ -273,7 +281,7 @@ def train(cfg: TrainConfig, progress: bool = True) -> TrainResult:
         if (time.monotonic() - t0) / 60 > cfg.max_minutes:
             log.info("time limit of %.1f min reached", cfg.max_minutes)
             break
-    model.load_state_dict(best[2])
+    model.load_state_dict(best[2])  # type: ignore[arg-type]  # None only if no epoch beat inf (NaN losses): it raises TypeError, as before
     model.eval()
     val_out, val_y = _predict(model, forward, val, cfg.batch_size)
     calib_idx = rng.choice(tr, size=min(512, len(tr)), replace=False)
