@@ -12,14 +12,19 @@ from __future__ import annotations
 import json
 import numbers
 from collections.abc import Callable
-from typing import Any, Final, Literal, NoReturn, get_args
+from typing import TYPE_CHECKING, Any, Final, Literal, NoReturn, get_args
 
 import numpy as np
 from numpy.typing import NDArray
 
 from superbody.edge.site import NAME_RE
 
+if TYPE_CHECKING:
+    import zenoh
+
 __all__ = [
+    "message_encoding",
+    "checked_json",
     "ROOT",
     "MAX_INT63",
     "REASONS",
@@ -362,3 +367,25 @@ def check_range(
     if bad.any():
         k = int(np.argmax(bad.ravel()))
         fail(where(k), "range", f"must be in {interval(k)}, got {a.ravel()[k]:g}")
+
+
+def message_encoding(schema: str, version: int) -> zenoh.Encoding:
+    """The ``zenoh.Encoding`` of a superbody message: JSON with ``<schema>/<version>`` (Zenoh 1.x
+    renders it ``application/json;<schema>/<version>``, each codec's ``ENCODING``)."""
+    import zenoh  # lazily: the codecs themselves do not need Zenoh
+
+    return zenoh.Encoding.APPLICATION_JSON.with_schema(f"{schema}/{version}")
+
+
+def checked_json(doc: dict, validate: Callable[[Any, str | None], object], what: str) -> bytes:
+    """``doc`` as compact JSON, once the message's own validator takes it: a codec refuses to send
+    what every subscriber would reject, and fails where the bug is.
+
+    Raises:
+        ValueError: ``cannot encode {what}: `` and the validator's ``DecodeError``.
+    """
+    try:
+        validate(doc, None)
+    except DecodeError as e:
+        raise ValueError(f"cannot encode {what}: {e}") from e
+    return json.dumps(doc, separators=(",", ":"), allow_nan=False).encode("utf-8")

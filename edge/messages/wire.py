@@ -31,7 +31,6 @@ sends) and writes the structs with msgspec; on a failed check, the validator nam
 
 from __future__ import annotations
 
-import json
 import math
 from itertools import chain
 from typing import TYPE_CHECKING, Any, Final, cast
@@ -82,7 +81,9 @@ from superbody.edge.messages.payload import (
     check_numbers,
     check_object,
     check_range,
+    checked_json,
     fail,
+    message_encoding,
     parse_json,
     typed_input,
 )
@@ -449,17 +450,10 @@ def _checked_encode(obs: Observation) -> bytes:
         "image": [as_int(obs.width), as_int(obs.height)],
         "people": [_person_doc(p, f"people[{i}]") for i, p in enumerate(obs.people)],
     }
-    # Refuse to send what every subscriber would reject: fail here, where the bug is.
-    try:
-        _observation(doc, None)
-    except DecodeError as e:
-        raise ValueError(f"cannot encode observation: {e}") from e
-    return json.dumps(doc, separators=(",", ":"), allow_nan=False).encode("utf-8")
+    return checked_json(doc, _observation, "observation")
 
 
 def zenoh_encoding() -> zenoh.Encoding:
     """The ``zenoh.Encoding`` to put with each payload (``str()`` of it equals ``ENCODING``)."""
-    import zenoh  # lazily: the codec itself does not need Zenoh
-
-    return zenoh.Encoding.APPLICATION_JSON.with_schema(f"{SCHEMA}/{VERSION}")
+    return message_encoding(SCHEMA, VERSION)
 

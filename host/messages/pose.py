@@ -29,7 +29,6 @@ structs; on a failed check the validator names the field.
 
 from __future__ import annotations
 
-import json
 import math
 import numbers
 import re
@@ -44,7 +43,9 @@ from superbody.edge.messages.payload import (
     REASONS,
     DecodeError,
     as_int,
+    checked_json,
     fail,
+    message_encoding,
     parse_json,
     typed_input,
 )
@@ -372,16 +373,9 @@ def _checked_encode(poses: PoseArray) -> bytes:
         "cameras_alive": _as_list(poses.cameras_alive),
         "people": [_person_doc(p, f"people[{i}]") for i, p in enumerate(poses.people)],
     }
-    # Refuse to send what every subscriber would reject: fail here, where the bug is.
-    try:
-        _pose_array(doc, None)
-    except DecodeError as e:
-        raise ValueError(f"cannot encode poses: {e}") from e
-    return json.dumps(doc, separators=(",", ":"), allow_nan=False).encode("utf-8")
+    return checked_json(doc, _pose_array, "poses")
 
 
 def zenoh_encoding() -> zenoh.Encoding:
     """The ``zenoh.Encoding`` to put with each payload (``str()`` of it equals ``ENCODING``)."""
-    import zenoh  # lazily: the codec itself does not need Zenoh
-
-    return zenoh.Encoding.APPLICATION_JSON.with_schema(f"{SCHEMA}/{VERSION}")
+    return message_encoding(SCHEMA, VERSION)

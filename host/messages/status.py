@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Annotated, Any, Final
 import msgspec
 from msgspec import Meta, Struct
 
-from superbody.edge.messages.payload import NAME_PATTERN, DecodeError, Reason, check_object, fail, join_path, parse_json
+from superbody.edge.messages.payload import NAME_PATTERN, DecodeError, Reason, check_object, fail, join_path, message_encoding, parse_json
 from superbody.edge.site import NAME_RE
 
 if TYPE_CHECKING:
@@ -150,6 +150,4 @@ def _validation_error(text: str) -> DecodeError:
 
 def zenoh_encoding() -> zenoh.Encoding:
     """The ``zenoh.Encoding`` to put with each payload (``str()`` of it equals ``ENCODING``)."""
-    import zenoh  # lazily: the codec itself does not need Zenoh
-
-    return zenoh.Encoding.APPLICATION_JSON.with_schema(f"{SCHEMA}/{VERSION}")
+    return message_encoding(SCHEMA, VERSION)
