@@ -10,8 +10,8 @@ Sources (``--source``):
 - ``oak[:DEVICE_ID]``: a Luxonis OAK with the pose network on the device (edge/sources/oak.py, the
   ``oak`` extra);
 - ``video:PATH``, ``webcam:INDEX``, ``rtsp://...``: OpenCV captures (edge/sources/video.py) whose images
-  go through a host detector, ``--detector blazepose | yolo-pose:PATH.onnx | rtmo:PATH.onnx``
-  (edge/detectors/base.py);
+  go through a host detector, ``--detector movenet | blazepose | yolo-pose:PATH.onnx | rtmo:PATH.onnx``
+  (edge/detectors/);
 - ``replay:PATH``: a ``superbody record`` MCAP file, this camera's Observations re-published
   with their original timing, stamps shifted to the replay's start (edge/sources/replay.py).
 
