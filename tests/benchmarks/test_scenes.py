@@ -1,0 +1,222 @@
+"""The hard-conditions scenes (benchmarks/scenes.py, issue 28 item 4): the scorer on hand-made
+sequences, each kind of scene run briefly in-process through the host's aggregator, and the
+benchmark as its own processes (``--jobs 2``) writing its JSON.
+
+The scene tests assert what each scene is built to exercise and what must hold there; two
+known defects (a detector's false positives become confirmed ghost tracks) are strict xfails,
+so that fixing them turns these tests red until the marks are removed.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from benchmarks import scenes
+from benchmarks.scenes import MotScorer, Visibility
+from tests.conftest import ROOT
+
+S = 1_000_000_000
+TWO = np.array([[0.0, 0.0, 0.0], [2.0, 0.0, math.pi / 2]])  # two standing people, (N, 3)
+
+
+def _score(steps: list[tuple], countable=(True, True), truth=TWO) -> dict:
+    """Each step: (ids, poses (M, 3)) against the same truth."""
+    sc = MotScorer()
+    for ids, poses in steps:
+        sc.add(truth, np.array(countable), ids, np.array(poses, dtype=float).reshape(-1, 3))
+    return sc.summary()
+
+
+ON_A, ON_B = (0.05, 0.0, 0.1), (2.0, 0.05, math.pi / 2)  # 50 mm off each, A's yaw 0.1 rad off
+
+# (steps, expected): each a hand-made sequence of published people.
+SCORER_CASES = [
+    # Tracked perfectly: every countable person-step a hit, nothing else.
+    ([([1, 2], [ON_A, ON_B])] * 3,
+     dict(hits=6, misses=0, false_positives=0, id_switches=0, recall=1.0, precision=1.0, mota=1.0, tracks=2, extra_tracks=0)),
+    # A's track is replaced by a new id (a loss and a new track): one switch, one duplicate track.
+    ([([1, 2], [ON_A, ON_B]), ([3, 2], [ON_A, ON_B]), ([3, 2], [ON_A, ON_B])],
+     dict(hits=6, id_switches=1, duplicate_tracks=1, ghost_tracks=0, extra_tracks=1, mota=1 - 1 / 6)),
+    # The two tracks swap people and swap back: four switches, no extra track.
+    ([([1, 2], [ON_A, ON_B]), ([1, 2], [ON_B, ON_A]), ([1, 2], [ON_A, ON_B])],
+     dict(hits=6, id_switches=4, extra_tracks=0)),
+    # A ghost 3 m from anyone, in one step: a false positive and a ghost track.
+    ([([1, 2], [ON_A, ON_B]), ([1, 2, 9], [ON_A, ON_B, (0.0, 3.0, 0.0)])],
+     dict(hits=4, false_positives=1, ghost_steps=1, duplicate_steps=0, ghost_tracks=1, precision=0.8, false_positive_share=0.2)),
+    # A second track 0.2 m from A, as long as A's: a duplicate every step, one duplicate track.
+    ([([1, 2, 5], [ON_A, ON_B, (0.2, 0.0, 0.0)])] * 2,
+     dict(hits=4, false_positives=2, duplicate_steps=2, ghost_steps=0, duplicate_tracks=1, ghost_tracks=0, extra_tracks=1)),
+    # Off by more than the 0.5 m gate: B missed and a ghost published.
+    ([([1, 2], [ON_A, (2.6, 0.0, 0.0)])],
+     dict(hits=1, misses=1, false_positives=1, ghost_steps=1, recall=0.5, mota=0.0)),
+    # A track mostly alone (a phantom) that once stands beside B: a ghost track, not B's duplicate.
+    ([([1, 2, 7], [ON_A, ON_B, (0.0, 3.0, 0.0)])] * 3 + [([1, 2, 7], [ON_A, ON_B, (2.2, 0.0, 0.0)])],
+     dict(ghost_steps=3, duplicate_steps=1, ghost_tracks=1, duplicate_tracks=0, extra_tracks=1)),
+    # Nobody published: all misses.
+    ([([], [])] * 2, dict(hits=0, misses=4, false_positives=0, recall=0.0, mota=0.0, tracks=0)),
+]
+
+
+@pytest.mark.parametrize("steps,expected", SCORER_CASES)
+def test_scorer_counts(steps, expected):
+    got = _score(steps)
+    for key, value in expected.items():
+        assert got[key] == pytest.approx(value), (key, got)
+
+
+def test_people_passing_close_keep_their_tracks_in_the_score():
+    # A and B 0.3 m apart; each track drifts 0.2 m towards the other: by distance alone the
+    # Hungarian algorithm would swap them (0.1 + 0.1 < 0.2 + 0.2), but the tracks did not swap.
+    truth = np.array([[0.0, 0.0, 0.0], [0.3, 0.0, 0.0]])
+    sc = MotScorer()
+    for poses in ([[0.0, 0.0, 0.0], [0.3, 0.0, 0.0]], [[0.2, 0.0, 0.0], [0.1, 0.0, 0.0]], [[0.0, 0.0, 0.0], [0.3, 0.0, 0.0]]):
+        sc.add(truth, np.array([True, True]), [1, 2], np.array(poses))
+    s = sc.summary()
+    assert s["id_switches"] == 0 and s["hits"] == 6 and s["position_mm_p90"] == pytest.approx(200.0)
+
+
+def test_scorer_errors_wrap_yaw_and_use_each_poses_own_truth():
+    sc = MotScorer()
+    # B walks along +x at 2 m/s: published at two capture times 0.5 s apart, each exact at its own.
+    truth = np.array([[[0.0, 0.0, math.radians(179)], [1.0, 0.0, 0.0]],
+                      [[0.0, 0.0, math.radians(179)], [2.0, 0.0, 0.0]]])  # (M, N, 3)
+    sc.add(truth, np.array([True, True]), [1, 2], np.array([[0.0, 0.0, math.radians(-179)], [2.0, 0.0, 0.0]]))
+    s = sc.summary()
+    assert s["hits"] == 2 and s["position_mm_p50"] == pytest.approx(0.0)
+    assert s["yaw_deg_p90"] == pytest.approx(1.8)  # 2 and 0 degrees: across +-180, not 358
+
+
+def test_people_who_do_not_count_are_neither_hits_nor_misses_nor_false_positives():
+    # B is tracked but does not count (not seen long enough); A is missed.
+    s = _score([([2], [ON_B])], countable=(True, False))
+    assert (s["hits"], s["misses"], s["false_positives"], s["countable_person_steps"], s["true_person_steps"]) == (0, 1, 0, 1, 2)
+    assert s["ghost_tracks"] == 0 and s["coverage"] == 0.5
+
+
+def test_a_switch_across_a_gap_still_counts():
+    # A hit as track 1, then not countable (out of view) while nobody is published, then hit as track 4.
+    sc = MotScorer()
+    for countable, ids, poses in (((True, True), [1, 2], [ON_A, ON_B]), ((False, True), [2], [ON_B]), ((True, True), [4, 2], [ON_A, ON_B])):
+        sc.add(TWO, np.array(countable), ids, np.array(poses))
+    assert sc.summary()["id_switches"] == 1
+
+
+def test_empty_steps_are_undefined_not_perfect():
+    sc = MotScorer()
+    sc.add(np.zeros((0, 3)), np.zeros(0, bool), [], np.zeros((0, 3)))
+    s = sc.summary()
+    assert s["steps"] == 1 and math.isnan(s["recall"]) and math.isnan(s["precision"]) and math.isnan(s["mota"])
+    assert not scenes.meets_bar({**s, "extra_tracks": 0})
+
+
+def test_visibility_needs_a_settled_run_of_fresh_sightings():
+    vis = Visibility(2, fresh_s=0.5, gap_s=1.0, settle_s=2.5)
+    for t in np.arange(0.0, 3.01, 0.1):  # person 0 seen throughout, person 1 from 1 s on
+        vis.saw([0] if t < 1.0 else [0, 1], int(t * S))
+    assert vis.countable(int(3.0 * S)).tolist() == [True, False]
+    vis.saw([0], int(4.5 * S))  # a 1.5 s gap restarts person 0's run
+    assert vis.countable(int(4.5 * S)).tolist() == [False, False]  # and person 1 is stale (last seen at 3 s)
+
+
+@pytest.fixture(scope="module")
+def run():
+    """One short run of a scene, with one estimator, cached for the module."""
+    cache: dict[tuple, dict] = {}
+
+    def go(key: str, estimator: str, seconds: float = 6.0) -> dict:
+        if (key, estimator, seconds) not in cache:
+            cache[key, estimator, seconds] = scenes.run_scene(key, seconds, 1, (estimator,))
+        return cache[key, estimator, seconds]
+
+    return go
+
+
+def test_more_cameras_than_the_model_has_view_slots_drop_no_person(run):
+    sc = run("b", "rays", 5.0)
+    r = sc["estimators"]["rays"]
+    assert sc["cameras"] == 6 and r["max_views"] == 4
+    # The scene does what it is for: most estimates had more views than the model's slots ...
+    assert r["largest_view_set"] == 6 and r["views_over_limit"] > 0.3
+    # ... yet every person is published, once, with all their views reported.
+    assert r["recall"] >= 0.95 and r["extra_tracks"] == 0 and r["id_switches"] == 0
+    assert r["mean_views"] > 4.0
+
+
+def test_low_cameras_still_place_and_keep_people(run):
+    sc = run("c", "analytic", 5.0)
+    r = sc["estimators"]["analytic"]
+    assert sc["camera_heights_m"] == [1.0] * 4
+    # Geometry from level cameras holds. (The site-independent model's does not: it was trained
+    # on cameras 1.8-3 m up and misplaces one person by 0.5-1 m; docs/scenes.md.)
+    assert r["tracks"] == sc["people"] and r["extra_tracks"] == 0 and r["id_switches"] == 0
+    assert r["recall"] >= 0.95 and r["position_mm_p50"] < 80.0
+
+
+def test_a_crowd_on_two_by_two_metres_keeps_one_track_per_person(run):
+    sc = run("d", "rays")
+    r = sc["estimators"]["rays"]
+    assert sc["people"] >= 4
+    assert r["tracks"] == sc["people"] and r["extra_tracks"] == 0 and r["id_switches"] == 0
+    assert r["recall"] >= 0.95
+
+
+@pytest.mark.parametrize("key", ["e", "h"])  # the same flat signature on every view; no colour at all
+def test_identical_or_missing_colours_leave_geometry_and_time(run, key):
+    sc = run(key, "rays")
+    r = sc["estimators"]["rays"]
+    assert sc["colour"] == {"e": "same", "h": "none"}[key]
+    assert r["id_switches"] == 0 and r["extra_tracks"] == 0 and r["recall"] >= 0.95
+
+
+@pytest.mark.parametrize("key", ["f", "i"])  # random partial false positives; a static phantom in one camera
+def test_false_positives_cost_the_real_people_nothing(run, key):
+    sc = run(key, "rays")
+    r = sc["estimators"]["rays"]
+    assert sc["spurious_prob"] > 0.1 or sc["phantom_views"] > 40
+    assert r["recall"] >= 0.95 and r["id_switches"] == 0 and r["duplicate_tracks"] == 0
+
+
+@pytest.mark.xfail(strict=True, reason="known defect (issue 28 item 4): a detector's false positives are confirmed as people")
+@pytest.mark.parametrize("key", ["f", "i"])
+def test_false_positives_start_no_ghost_track(run, key):
+    assert run(key, "rays")["estimators"]["rays"]["ghost_tracks"] == 0
+
+
+def test_people_cut_off_at_the_image_edges(run):
+    sc = run("g", "rays")
+    r = sc["estimators"]["rays"]
+    assert sc["estimators"]["rays"]["coverage"] < 0.5  # the scene does cut people off: most person-steps go unseen
+    assert r["recall"] >= 0.8 and r["precision"] >= 0.9 and r["ghost_tracks"] == 0
+
+
+def _finite_numbers(doc: object) -> bool:
+    if isinstance(doc, dict):
+        return all(_finite_numbers(v) for v in doc.values())
+    if isinstance(doc, list):
+        return all(_finite_numbers(v) for v in doc)
+    return not isinstance(doc, float) or math.isfinite(doc)
+
+
+def test_benchmark_runs_as_processes_and_writes_its_json(tmp_path):
+    out = tmp_path / "scenes.json"
+    r = subprocess.run([sys.executable, "-m", "benchmarks.scenes", "--scenes", "a,g", "--seconds", "6", "--jobs", "2",
+                        "--no-progress", "--json-out", str(out)], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert r.returncode == 0, r.stderr[-2000:]
+    doc = json.loads(out.read_text())
+    assert doc["config"]["seconds"] == 6 and list(doc["scenes"]) == ["a", "g"]
+    assert set(doc["scenes"]["a"]["estimators"]) == {"analytic", "rays", "site"}  # the apartment ships its own model
+    assert set(doc["scenes"]["g"]["estimators"]) == {"analytic", "rays"}
+    for sc in doc["scenes"].values():
+        for est in sc["estimators"].values():
+            for key in ("recall", "precision", "mota", "id_switches", "extra_tracks", "ghost_tracks", "duplicate_tracks",
+                        "false_positive_share", "position_mm_p50", "position_mm_p90", "yaw_deg_p50", "yaw_deg_p90", "coverage"):
+                assert isinstance(est[key], (int, float)) and math.isfinite(est[key]), (key, est)
+    assert _finite_numbers(doc)
+    assert all(est["recall"] > 0.5 for est in doc["scenes"]["a"]["estimators"].values())
+    assert "a apartment" in r.stdout and "MOTA" in r.stdout
