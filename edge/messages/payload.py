@@ -24,6 +24,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "message_encoding",
+    "int_within",
     "checked_json",
     "ROOT",
     "MAX_INT63",
@@ -389,3 +390,13 @@ def checked_json(doc: dict, validate: Callable[[Any, str | None], object], what:
     except DecodeError as e:
         raise ValueError(f"cannot encode {what}: {e}") from e
     return json.dumps(doc, separators=(",", ":"), allow_nan=False).encode("utf-8")
+
+
+def int_within(value: Any, lo: int, hi: int) -> int | None:
+    """``value`` as an int if it is an integer (numpy's too, not a bool) in [lo, hi], else None:
+    the encoders' vectorised checks use it on the values they are about to send."""
+    if type(value) is not int:
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            return None
+        value = int(value)
+    return value if lo <= value <= hi else None

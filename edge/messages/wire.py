@@ -83,6 +83,7 @@ from superbody.edge.messages.payload import (
     check_range,
     checked_json,
     fail,
+    int_within,
     message_encoding,
     parse_json,
     typed_input,
@@ -342,14 +343,6 @@ def _person_doc(p: PersonView, path: str) -> dict:
     return doc
 
 
-def _int_in(value: Any, lo: int, hi: int) -> int | None:
-    """``value`` as an int if it is an integer (numpy's too, not a bool) in [lo, hi], else None."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        return None
-    value = int(value)
-    return value if lo <= value <= hi else None
-
-
 def _null_rows(a: NDArray[np.float64], missing: NDArray[np.bool_]) -> list:
     """(P, 17, 3) to nested lists, with the ``missing`` (P, 17) rows as None."""
     rows = a.tolist()
@@ -365,8 +358,8 @@ def _typed_encode(obs: Observation) -> bytes | None:
     site, camera = obs.site, obs.camera
     if type(site) is not str or type(camera) is not str or not NAME_RE.fullmatch(site) or not NAME_RE.fullmatch(camera):
         return None
-    seq, stamp_ns = _int_in(obs.seq, 0, MAX_INT63), _int_in(obs.stamp_ns, 0, MAX_INT63)
-    w, h = _int_in(obs.width, _IMAGE_MIN, _IMAGE_MAX), _int_in(obs.height, _IMAGE_MIN, _IMAGE_MAX)
+    seq, stamp_ns = int_within(obs.seq, 0, MAX_INT63), int_within(obs.stamp_ns, 0, MAX_INT63)
+    w, h = int_within(obs.width, _IMAGE_MIN, _IMAGE_MAX), int_within(obs.height, _IMAGE_MIN, _IMAGE_MAX)
     people = obs.people
     n = len(people)
     if seq is None or stamp_ns is None or w is None or h is None or n > MAX_PEOPLE:

@@ -45,6 +45,7 @@ from superbody.edge.messages.payload import (
     as_int,
     checked_json,
     fail,
+    int_within,
     message_encoding,
     parse_json,
     typed_input,
@@ -240,19 +241,10 @@ def _person_doc(p: PersonPose, path: str) -> dict:
     }
 
 
-def _int_in(value: Any, lo: int, hi: int) -> int | None:
-    """``value`` as an int if it is an integer (numpy's too, not a bool) in [lo, hi], else None."""
-    if type(value) is not int:
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-            return None
-        value = int(value)
-    return value if lo <= value <= hi else None
-
-
 def _ints_in(values: list, lo: int, hi: int) -> list[int] | None:
     """Every value an integer in [lo, hi] (as ``_int_in``), as Python ints; None if one is not."""
     if not all(type(v) is int for v in values):
-        values = [_int_in(v, lo, hi) for v in values]
+        values = [int_within(v, lo, hi) for v in values]
         return None if None in values else values
     return values if not values or (lo <= min(values) and max(values) <= hi) else None
 
