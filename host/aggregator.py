@@ -219,7 +219,7 @@ class Aggregator:
                 views = sets[tid]
                 # Rates beyond what the message allows (a finite difference over estimates a few
                 # ms apart, without the filter) are clamped: one person's field, never the array.
-                vx, vy, yaw_rate = np.clip((fp.vx, fp.vy, fp.yaw_rate), -MAX_SPEED, MAX_SPEED).tolist()
+                vx, vy, yaw_rate = (min(max(v, -MAX_SPEED), MAX_SPEED) for v in (fp.vx, fp.vy, fp.yaw_rate))
                 self._poses[tid] = (pose_msg.PersonPose(
                     id=tid, x=fp.x, y=fp.y, yaw=fp.yaw, vx=vx, vy=vy, yaw_rate=yaw_rate,
                     cov=fp.cov, confidence=c, cameras=tuple(sorted(views)),

@@ -153,14 +153,18 @@ def _register_record(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_run_record)
 
 
-def _port(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        n = -1
-    if not 0 <= n <= 65535:
-        raise argparse.ArgumentTypeError(f"--ws-port must be an integer in [0, 65535], got {text!r}")
-    return n
+def _int_arg(flag: str, lo: int, hi: int):
+    """argparse type: an integer in [lo, hi]; anything else is ``FLAG must be an integer in [lo, hi]``."""
+    def parse(text: str) -> int:
+        try:
+            n = int(text)
+        except ValueError:
+            n = lo - 1
+        if not lo <= n <= hi:
+            raise argparse.ArgumentTypeError(f"{flag} must be an integer in [{lo}, {hi}], got {text!r}")
+        return n
+
+    return parse
 
 
 def _run_view(args: argparse.Namespace) -> int:
@@ -189,20 +193,10 @@ def _run_view(args: argparse.Namespace) -> int:
 def _register_view(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("view", help="live 3D view of a site in Foxglove (floor, cameras, people as arrows)")
     p.add_argument("--site", default=str(site_path()), help="site file (default: the shipped wtf-apartment, the demo's)")
-    p.add_argument("--ws-port", type=_port, default=8765, help="Foxglove WebSocket port (default 8765, Foxglove's default; 0: any free port)")
+    p.add_argument("--ws-port", type=_int_arg("--ws-port", 0, 65535), default=8765, help="Foxglove WebSocket port (default 8765, Foxglove's default; 0: any free port)")
     p.add_argument("--ws-host", default="127.0.0.1", help="address to serve on (default 127.0.0.1; 0.0.0.0 for other machines)")
     add_session_args(p)
     p.set_defaults(func=_run_view)
-
-
-def _domain(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        n = -1
-    if not 0 <= n <= _MAX_DOMAIN:
-        raise argparse.ArgumentTypeError(f"--ros2-domain must be an integer in [0, {_MAX_DOMAIN}], got {text!r}")
-    return n
 
 
 def _topic(text: str) -> str:
@@ -219,7 +213,7 @@ def _add_ros2_args(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--ros2-topic", type=_topic, default=Ros2Config.topic, help="ROS 2 topic (default %(default)s)")
     env = os.environ.get("ROS_DOMAIN_ID", "")
     default = int(env) if env.isdigit() and int(env) <= _MAX_DOMAIN else 0
-    g.add_argument("--ros2-domain", type=_domain, default=default, help="ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID, else 0)")
+    g.add_argument("--ros2-domain", type=_int_arg("--ros2-domain", 0, _MAX_DOMAIN), default=default, help="ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID, else 0)")
 
 
 def _open_ros2_sink(args: argparse.Namespace) -> Ros2Sink:

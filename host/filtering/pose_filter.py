@@ -292,13 +292,19 @@ def _packed(pos: NDArray, rate: NDArray, cov: AxisCov) -> tuple[NDArray, NDArray
     return np.concatenate([pos, rate], axis=1), P
 
 
-def _predict_many(filters: Sequence[PoseFilter], t_ns: NDArray) -> tuple[NDArray, NDArray]:
-    """Each filter's state predicted to its time in ``t_ns`` (n,): x (n, 6, 1), P (n, 6, 6)."""
+def _predicted(filters: Sequence[PoseFilter], t_ns: NDArray) -> tuple[NDArray, NDArray, AxisCov]:
+    """Each filter's axes predicted to its time in ``t_ns`` (n,), the yaw wrapped: positions and
+    rates (n, 3), covariances (n, 3) each."""
     dt = ((np.asarray(t_ns, dtype=np.int64) - np.array([f._t for f in filters], dtype=np.int64)) * _NS)[:, None]  # (n, 1)
     pos, rate, cov, q = _axes(filters)
     pos, rate, cov = cv_predict(pos, rate, cov, dt, q)
     pos[:, 2] = wrap_angle(pos[:, 2])
-    x, P = _packed(pos, rate, cov)
+    return pos, rate, cov
+
+
+def _predict_many(filters: Sequence[PoseFilter], t_ns: NDArray) -> tuple[NDArray, NDArray]:
+    """Each filter's state predicted to its time in ``t_ns`` (n,): x (n, 6, 1), P (n, 6, 6)."""
+    x, P = _packed(*_predicted(filters, t_ns))
     return x[:, :, None], P
 
 
@@ -306,16 +312,13 @@ def _step(filters: Sequence[PoseFilter], t_ns: NDArray, pose: NDArray, std: NDAr
     """The plain predict + update of n filters with a state not newer than ``t_ns`` (n,), in one
     batch: measurements ``pose`` (n, 3) of 1-sigma ``std`` (n, 3). Sets and returns their states.
 
-    ``predict`` and ``update`` with this filter's F, Q, H and R, written out per element. The
-    three axes never mix: F and Q act on each (position, rate) pair alone, H reads the positions
-    and R is diagonal, so a covariance that starts with no cross-axis terms (every path of
-    ``PoseFilter`` starts one so) keeps none, and the 6 x 6 filter is three 2 x 2 filters. Same
-    numbers (tests/host/filtering/test_pose_filter.py), without a batch of 6 x 6 products and a solve per step.
+    The three axes never mix: F and Q act on each (position, rate) pair alone, H reads the
+    positions and R is diagonal, so a covariance that starts with no cross-axis terms (every path
+    of ``PoseFilter`` starts one so) keeps none, and the 6 x 6 filter is three 2 x 2 filters:
+    ``kalman.cv_predict`` and ``kalman.cv_update`` on (n, 3) axes. Same numbers as the textbook
+    6 x 6 form (tests/host/filtering/test_pose_filter.py and test_kalman.py).
     """
-    dt = ((np.asarray(t_ns, dtype=np.int64) - np.array([f._t for f in filters], dtype=np.int64)) * _NS)[:, None]  # (n, 1)
-    pos, rate, cov, q = _axes(filters)
-    pos, rate, cov = cv_predict(pos, rate, cov, dt, q)
-    pos[:, 2] = wrap_angle(pos[:, 2])
+    pos, rate, cov = _predicted(filters, t_ns)
     # Update with z = the measured positions, the yaw unwrapped next to the predicted yaw (the
     # innovation stays in (-pi, pi])
     z = np.column_stack([pose[:, 0], pose[:, 1], pos[:, 2] + wrap_angle(wrap_angle(pose[:, 2]) - pos[:, 2])])  # (n, 3)
