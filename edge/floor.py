@@ -6,8 +6,12 @@ from-dataset``, or any site without a hand-drawn floor) it is derived here:
 
 1. a floor point counts as *seen* by a camera when a person standing there has part of their
    torso in the image: the point above it at hip or at shoulder height (0.9 m, 1.4 m) projects
-   inside the image (less a small border), in front of the camera, within ``max_range_m`` on
-   the floor (a detector finds a person from the head and shoulders, or the hips and legs);
+   inside the image (less a small border), in front of the camera (a detector finds a person
+   from the head and shoulders, or the hips and legs). There is no range cut-off: a person 6 m
+   from every camera is still in the room, only poorly seen, and how well the views see a
+   place is the estimator's business, not the floor's. The only limit is the detector's: a
+   standing person must span at least ``MIN_PERSON_PX`` image rows (``detectable_range_m``:
+   about 22 m for a 640 x 480 camera with a 60 degree field of view);
 2. the room the cameras stand in: every camera hangs on a wall and looks into the room, so the
    room lies in front of each camera, beyond ``wall_margin_m`` along its horizontal viewing
    direction (a half-plane per camera);
@@ -27,25 +31,37 @@ from numpy.typing import NDArray
 
 from superbody.edge.camera import Camera, project
 
-__all__ = ["TORSO_HEIGHTS_M", "seen_by", "views_at", "in_front", "visible_floor", "point_in_polygon"]
+__all__ = [
+    "TORSO_HEIGHTS_M", "MIN_PERSON_PX", "detectable_range_m", "seen_by", "views_at", "in_front", "visible_floor",
+    "point_in_polygon",
+]
 
 TORSO_HEIGHTS_M = (0.9, 1.4)  # hips and shoulders of a standing adult (edge.body's typical heights)
+PERSON_HEIGHT_M = 1.7  # a standing adult, head to feet
+MIN_PERSON_PX = 48  # image rows a pose detector needs for a whole person (its smallest useful scale)
 
 
-def seen_by(cam: Camera, xy: NDArray, max_range_m: float = 5.0, border: float = 0.02) -> NDArray[np.bool_]:
+def detectable_range_m(cam: Camera, min_person_px: float = MIN_PERSON_PX) -> float:
+    """The farthest distance at which a standing person spans ``min_person_px`` rows of the camera."""
+    return float(cam.fy * PERSON_HEIGHT_M / min_person_px)
+
+
+def seen_by(cam: Camera, xy: NDArray, max_range_m: float | None = None, border: float = 0.02) -> NDArray[np.bool_]:
     """Which floor points a camera sees part of a standing person's torso at (hips or shoulders).
 
     Args:
         cam: the camera.
         xy: (N, 2) floor points, metres.
-        max_range_m: farthest floor distance from the camera's foot point that counts.
+        max_range_m: farthest floor distance from the camera's foot point that counts (None: the
+            detector's limit, ``detectable_range_m``).
         border: image border left out, as a fraction of the width and height.
 
     Returns:
         (N,) bool.
     """
     xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-    near = np.hypot(xy[:, 0] - cam.t[0], xy[:, 1] - cam.t[1]) <= max_range_m
+    reach = detectable_range_m(cam) if max_range_m is None else max_range_m
+    near = np.hypot(xy[:, 0] - cam.t[0], xy[:, 1] - cam.t[1]) <= reach
     bu, bv = border * cam.width, border * cam.height
     seen = np.zeros(len(xy), bool)
     for h in TORSO_HEIGHTS_M:
@@ -54,7 +70,7 @@ def seen_by(cam: Camera, xy: NDArray, max_range_m: float = 5.0, border: float = 
     return near & seen
 
 
-def views_at(cameras: Sequence[Camera], xy: NDArray, max_range_m: float = 5.0) -> NDArray[np.int64]:
+def views_at(cameras: Sequence[Camera], xy: NDArray, max_range_m: float | None = None) -> NDArray[np.int64]:
     """(N,) how many of the cameras see a person standing at each floor point (N, 2)."""
     xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
     return np.sum([seen_by(c, xy, max_range_m) for c in cameras], axis=0).astype(np.int64) if cameras else np.zeros(len(xy), np.int64)
@@ -78,7 +94,7 @@ def in_front(cameras: Sequence[Camera], xy: NDArray, wall_margin_m: float = 0.3)
 
 def visible_floor(
     cameras: Sequence[Camera],
-    max_range_m: float = 5.0,
+    max_range_m: float | None = None,
     wall_margin_m: float = 0.3,
     cell_m: float = 0.05,
     simplify_m: float = 0.05,
@@ -87,7 +103,8 @@ def visible_floor(
 
     Args:
         cameras: the site's cameras (at least one).
-        max_range_m: a camera's useful floor range.
+        max_range_m: a camera's useful floor range (None, the default: the detector's limit, no
+            cut-off of the room).
         wall_margin_m: how far in front of a camera's wall a person can stand.
         cell_m: grid resolution.
         simplify_m: largest distance of the polygon from the traced region's outline.
@@ -103,8 +120,9 @@ def visible_floor(
     if not cameras:
         raise ValueError("visible_floor: no cameras")
     centres = np.array([c.t[:2] for c in cameras])
-    lo = centres.min(0) - max_range_m
-    hi = centres.max(0) + max_range_m
+    reach = max(detectable_range_m(c) for c in cameras) if max_range_m is None else max_range_m
+    lo = centres.min(0) - reach
+    hi = centres.max(0) + reach
     nx, ny = (np.ceil((hi - lo) / cell_m)).astype(int) + 1
     gx, gy = np.meshgrid(lo[0] + cell_m * np.arange(nx), lo[1] + cell_m * np.arange(ny))  # (ny, nx)
     xy = np.column_stack([gx.ravel(), gy.ravel()])

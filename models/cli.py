@@ -100,8 +100,9 @@ def _calibration_header(args: argparse.Namespace, fits: dict, errors: dict[str, 
     lines += _FPS_NOTE.format(fps=args.fps).splitlines()
     lines += [
         "floor: the room the cameras see, not the recording's path (edge/floor.py): floor points where",
-        "a standing person's hips (0.9 m) or shoulders (1.4 m) fall inside some camera's image within",
-        "5 m of it, in front of every camera's wall (0.3 m margin), traced on a 5 cm grid and simplified.",
+        "a standing person's hips (0.9 m) or shoulders (1.4 m) fall inside some camera's image, at any",
+        "distance (no range cut-off: far is poorly seen, not outside the room; the only limit is a person",
+        "spanning 48 image rows), in front of every camera's wall (0.3 m margin), traced on a 5 cm grid.",
         "No obstacles: the data does not show the furniture.",
     ]
     return "\n".join(lines)

@@ -271,13 +271,13 @@ def floor_rectangle(xy: NDArray, margin: float = 0.5, step: float = 0.1) -> tupl
 
 def calibrate_dataset(
     raw: Sequence[RawSample], *, name: str = "wtf-apartment", fps: float = 15.0, refine: bool = True,
-    floor_range_m: float = 5.0,
+    floor_range_m: float | None = None,
 ) -> tuple[Site, dict[str, CameraFit]]:
     """The site of a WheresTheFellow recording: one camera per dataset camera, and the floor.
 
     The floor is the part of the room the recovered cameras see (``edge.floor.visible_floor``:
-    a standing person's hips or shoulders in some camera's image within ``floor_range_m``, in
-    front of every camera's wall), not where this recording walked; there are no obstacles
+    a standing person's hips or shoulders in some camera's image, in front of every camera's
+    wall; no range cut-off unless ``floor_range_m`` is given), not where this recording walked; there are no obstacles
     (the data does not show them).
 
     Args:
@@ -285,7 +285,8 @@ def calibrate_dataset(
         name: site name.
         fps: publishing rate written for every camera.
         refine: refine each camera after the DLT.
-        floor_range_m: a camera's useful floor range for the floor polygon.
+        floor_range_m: a camera's useful floor range for the floor polygon (None: no cut-off, the
+            detector's limit ``edge.floor.detectable_range_m``).
 
     Returns:
         ``(site, fits)``: the site and each camera's fit, by camera id.

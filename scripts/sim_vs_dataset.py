@@ -3,9 +3,12 @@
     python scripts/sim_vs_dataset.py [--dataset ../shared/datasets/wheresthefellow/dev.json]
         [--site deploy/sites/wtf-apartment.toml] [--seconds 600] [--seed 0] [--json-out F]
 
-Simulates one person (as in the recordings) walking through the site, sampled at the dataset's
-rate, keeps the instants at which at least one camera reports the person (the dataset holds
-only those), and prints joints per view, views per person, scores and per-joint detection rates.
+Simulates one person (as in the recordings) walking the stretch of floor the recording walked
+(``path_floor``: what a detector reports depends on where the person stands), sampled at the
+dataset's rate, keeps the instants at which at least one camera reports the person (the dataset
+holds only those), and prints joints per view, views per person, scores and per-joint detection
+rates. Then the views by the camera's distance to the person (share, joints, <= 8 joints, cut
+off at an image edge), the simulated person walking the whole floor this time.
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ sys.path.insert(0, str(ROOT))
 
 from superbody.edge import body  # noqa: E402
 from superbody.edge.site import load_site  # noqa: E402
-from superbody.models.data.simstats import facing_rates, simulate, statistics  # noqa: E402
+from superbody.models.data.simstats import facing_rates, path_floor, simulate, statistics, view_buckets  # noqa: E402
 from superbody.models.data.wtf import load_wtf  # noqa: E402
 
 
@@ -36,7 +39,8 @@ def main(dataset: str, site: str, seconds: float, seed: int, json_out: str | Non
     ts = [s.stamp_ns for s in loaded]
     rate = (len(ts) - 1) / ((ts[-1] - ts[0]) * 1e-9)
     sim_truth: list = []
-    sim = simulate(site, seconds, seed, rate, truths=sim_truth)
+    # Like for like: the simulated person walks the stretch of floor the recording walked.
+    sim = simulate(site, seconds, seed, rate, truths=sim_truth, floor=path_floor(np.array([s.truth[:2] for s in loaded])))
     a, b = statistics(real), statistics(sim)
     print(f"{'':28}{'dev.json':>12}{'simulator':>12}")
     print(_row("samples", a["samples"], b["samples"], "{:.0f}"))
@@ -68,6 +72,17 @@ def main(dataset: str, site: str, seconds: float, seed: int, json_out: str | Non
     norm = ra / (ra @ (ca / ca.sum()))[:, None]
     for j, name in enumerate(body.KEYPOINTS):
         print("    (" + ", ".join(f"{x:.2f}" for x in norm[j]) + f"),  # {name}")
+    # The buckets: the simulated person over the whole floor (far and cut-off views the recording has few of).
+    whole_truth: list = []
+    whole = simulate(site, seconds, seed, rate, truths=whole_truth)
+    a["view_buckets"] = view_buckets(real, [s.truth for s in loaded], st)
+    b["view_buckets"] = view_buckets(whole, whole_truth, st)
+    print("  views by the camera's distance to the person, dev.json / simulator: share of views, joints per view,")
+    print("  share with <= 8 joints, share cut off at an image edge (a joint within 8 px of the border):")
+    for name in a["view_buckets"]:
+        x, y = a["view_buckets"][name], b["view_buckets"][name]
+        print(f"    {name:<9} " + "  ".join(f"{x[k]:>5.2f}/{y[k]:<5.2f}" for k in ("share", "joints_mean", "few_joints", "at_edge"))
+              + f"   ({x['views']} / {y['views']} views)")
     if json_out:
         Path(json_out).write_text(json.dumps({"dev": a, "sim": b}, indent=1))
     return 0

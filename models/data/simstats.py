@@ -14,9 +14,11 @@ from superbody.edge import body
 from superbody.edge.sim import NoiseModel, SimCamera, World
 from superbody.edge.site import Site, load_site
 
-__all__ = ["statistics", "simulate", "facing_rates", "FACING_BINS"]
+__all__ = ["statistics", "simulate", "facing_rates", "view_buckets", "path_floor", "FACING_BINS", "DISTANCE_BINS_M", "EDGE_PX"]
 
 FACING_BINS = 8
+DISTANCE_BINS_M = (2.0, 3.0, 4.0, 5.0)  # edges of the distance buckets: < 2, 2-3, 3-4, 4-5, >= 5 m
+EDGE_PX = 8.0  # a view with a joint this close to the image border is cut off at an edge
 
 
 def statistics(samples: list[dict]) -> dict:
@@ -70,11 +72,60 @@ def facing_rates(samples: list[dict], truths: list, site: Site, bins: int = FACI
     return rates, counts
 
 
+def view_buckets(samples: list[dict], truths: list, site: Site) -> dict[str, dict[str, float]]:
+    """Views by the camera's floor distance to the person: per bucket its share of the views, the
+    mean joints per view, the share with at most 8 joints and the share cut off at an image edge
+    (a joint within ``EDGE_PX`` of the border).
+
+    Args:
+        samples: {camera id: (17, 3) keypoints} per instant, one person.
+        truths: (x, y, yaw) of that person per instant.
+        site: the cameras (their image sizes too).
+    """
+    dist, joints, edge = [], [], []
+    for s, (x, y, _yaw) in zip(samples, truths):
+        for cam_id, kp in s.items():
+            cam = site.camera(cam_id)
+            seen = kp[~np.isnan(kp[:, 0]), :2]
+            dist.append(math.hypot(cam.t[0] - x, cam.t[1] - y))
+            joints.append(len(seen))
+            near = (seen[:, 0] < EDGE_PX) | (seen[:, 0] > cam.width - 1 - EDGE_PX) | (seen[:, 1] < EDGE_PX) | (seen[:, 1] > cam.height - 1 - EDGE_PX)
+            edge.append(bool(near.any()))
+    d, j, e = np.asarray(dist), np.asarray(joints), np.asarray(edge)
+    edges = (0.0, *DISTANCE_BINS_M, math.inf)
+    out = {}
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        m = (d >= lo) & (d < hi)
+        name = f"< {hi:g} m" if lo == 0 else (f">= {lo:g} m" if math.isinf(hi) else f"{lo:g}-{hi:g} m")
+        n = int(m.sum())
+        out[name] = {"views": n, "share": n / max(len(d), 1), "joints_mean": float(j[m].mean()) if n else math.nan,
+                     "few_joints": float((j[m] <= 8).mean()) if n else math.nan, "at_edge": float(e[m].mean()) if n else math.nan}
+    return out
+
+
+def path_floor(xy: np.ndarray, margin_m: float = 0.3) -> tuple[tuple[float, float], ...]:
+    """The convex floor around a recording's path (N, 2), widened by ``margin_m``: where the
+    simulated person walks to compare the detector with that recording's, like for like (what a
+    detector reports depends on how far and where the person stands)."""
+    import cv2
+
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    ring = margin_m * np.array([[math.cos(a), math.sin(a)] for a in np.linspace(0, 2 * math.pi, 16, endpoint=False)])
+    pts = (xy[:, None, :] + ring[None]).reshape(-1, 2).astype(np.float32)
+    hull = cv2.convexHull(pts)[:, 0, :].astype(np.float64)
+    return tuple((round(float(x), 3), round(float(y), 3)) for x, y in hull)
+
+
 def simulate(site_path: str, seconds: float, seed: int, rate_hz: float, noise: NoiseModel = NoiseModel(), progress: bool = True,
-             truths: list | None = None) -> list[dict]:
+             truths: list | None = None, floor: tuple[tuple[float, float], ...] | None = None) -> list[dict]:
     """One simulated person seen by the site's cameras at ``rate_hz``; instants with no view are
-    left out. ``truths``, if given, receives the person's (x, y, yaw) at each kept instant."""
+    left out. ``truths``, if given, receives the person's (x, y, yaw) at each kept instant;
+    ``floor``, if given, replaces the site's floor (``path_floor``)."""
+    import dataclasses
+
     site = load_site(site_path)
+    if floor is not None:
+        site = dataclasses.replace(site, floor=floor)
     world = World(site, 1, seed)
     cams = [SimCamera(world, c, noise) for c in site.camera_ids]
     out = []

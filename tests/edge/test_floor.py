@@ -6,7 +6,15 @@ import numpy as np
 import pytest
 
 from superbody.edge.camera import Camera, look_at_rotation
-from superbody.edge.floor import in_front, point_in_polygon, seen_by, views_at, visible_floor
+from superbody.edge.floor import (
+    MIN_PERSON_PX,
+    detectable_range_m,
+    in_front,
+    point_in_polygon,
+    seen_by,
+    views_at,
+    visible_floor,
+)
 from superbody.edge.site import load_site
 from superbody.models.data.wtf import load_wtf
 from tests.conftest import WTF_SITE
@@ -34,19 +42,25 @@ def test_point_in_polygon_empty():
     assert point_in_polygon(np.zeros((0, 2)), SQUARE).shape == (0,)
 
 
-def test_a_wall_camera_sees_in_front_within_range_not_behind():
+def test_a_wall_camera_sees_in_front_not_behind_and_far_without_a_range_cut_off():
     cam = _wall_camera()
-    pts = np.array([[4.0, 0.0], [-2.0, 0.0], [4.0, 8.0], [9.0, 0.0]])
-    # in front on its axis; behind it; far off to the side; beyond the 5 m range
-    assert seen_by(cam, pts).tolist() == [True, False, False, False]
-    assert in_front([cam], pts).tolist() == [True, False, True, True]
+    pts = np.array([[4.0, 0.0], [-2.0, 0.0], [4.0, 8.0], [9.0, 0.0], [20.0, 0.0]])
+    # in front on its axis; behind it; far off to the side; 9 m away (still seen: poorly, but seen);
+    # 20 m away, beyond where a person spans MIN_PERSON_PX rows (17.7 m at fy = 500)
+    assert detectable_range_m(cam) == pytest.approx(500 * 1.7 / MIN_PERSON_PX)
+    assert seen_by(cam, pts).tolist() == [True, False, False, True, False]
+    assert seen_by(cam, pts, max_range_m=5.0).tolist() == [True, False, False, False, False]  # an explicit range still cuts
+    assert in_front([cam], pts).tolist() == [True, False, True, True, True]
 
 
-def test_visible_floor_is_in_front_of_the_camera_and_within_range():
+def test_visible_floor_is_in_front_of_the_camera_and_reaches_as_far_as_it_sees():
     cam = _wall_camera()
     poly = np.array(visible_floor([cam]))
     assert poly[:, 0].min() >= 0.3 - 0.05  # the wall margin
-    assert np.hypot(poly[:, 0], poly[:, 1]).max() <= 5.0 + 0.1
+    assert point_in_polygon(np.array([[9.0, 0.0]]), poly)[0]  # no 5 m cut-off
+    assert np.hypot(poly[:, 0], poly[:, 1]).max() <= detectable_range_m(cam) + 0.1
+    ranged = np.array(visible_floor([cam], max_range_m=5.0))
+    assert np.hypot(ranged[:, 0], ranged[:, 1]).max() <= 5.0 + 0.1
     area2 = np.sum(poly[:, 0] * np.roll(poly[:, 1], -1) - np.roll(poly[:, 0], -1) * poly[:, 1])
     assert area2 > 0  # counter-clockwise
     assert point_in_polygon(np.array([[4.0, 0.0]]), poly)[0]
@@ -65,6 +79,10 @@ def test_apartment_floor_is_the_room_not_the_recording(dev_json):
     x0, y0, x1, y1 = site.floor_bounds
     assert y1 > truth[:, 1].max() + 1.0  # the recording stops at y = 0.8 m; camera 3 hangs at y = 2.94 m
     assert y1 < site.camera("3").t[1]
+    # The stretch the paper's test recording walks near camera 3 (x 0.1-1.0 m, y 1.5-1.9 m), 5.5 m from
+    # camera 1: once cut out of the floor by a 5 m range limit.
+    notch = np.mgrid[0.1:1.01:0.1, 1.5:1.91:0.1].reshape(2, -1).T
+    assert point_in_polygon(notch, site.floor).all()
     # Every floor point is seen by at least one camera.
     g = np.mgrid[x0:x1:0.1, y0:y1:0.1].reshape(2, -1).T
     g = g[point_in_polygon(g, site.floor)]

@@ -104,7 +104,8 @@ def test_debias_subtracts_the_bias_of_each_camera_count_and_wraps_yaw():
 
 def test_support_gate_knows_the_floor():
     site = load_site(WTF_SITE)
-    pts = np.array([[0.0, 0.0], [10.0, 10.0], [site.floor_bounds[2] + 0.3, 0.0]])
+    west = min(site.floor, key=lambda v: v[0])  # the floor's westmost corner
+    pts = np.array([[0.0, 0.0], [10.0, 10.0], [west[0] - 0.3, west[1]]])
     # inside; far away; just beyond the floor's edge (within the 0.5 m margin)
     assert _near_floor(pts, site, 0.5).tolist() == [True, False, True]
     assert _near_floor(pts, site, 0.0).tolist() == [True, False, False]

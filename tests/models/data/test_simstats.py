@@ -5,7 +5,7 @@ import pytest
 
 from superbody.edge import body
 from superbody.edge.site import load_site
-from superbody.models.data.simstats import facing_rates, simulate, statistics
+from superbody.models.data.simstats import facing_rates, path_floor, simulate, statistics
 from superbody.models.data.wtf import load_wtf
 from tests.conftest import WTF_SITE
 
@@ -15,7 +15,9 @@ def runs(dev_json):
     loaded = load_wtf(dev_json)
     real = [{c: v.keypoints for c, v in s.views.items()} for s in loaded]
     truths: list = []
-    sim = simulate(str(WTF_SITE), seconds=120, seed=3, rate_hz=8.0, progress=False, truths=truths)
+    # On the stretch of floor the recording walked: what a detector reports depends on where the person stands.
+    floor = path_floor(np.array([s.truth[:2] for s in loaded]))
+    sim = simulate(str(WTF_SITE), seconds=120, seed=3, rate_hz=8.0, progress=False, truths=truths, floor=floor)
     return (real, [s.truth for s in loaded]), (sim, truths)
 
 

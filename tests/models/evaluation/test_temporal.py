@@ -210,22 +210,24 @@ def test_jitter(pred, truth, mask, expected):
 
 def test_filtering_reduces_jitter_on_a_simulated_walk():
     samples, stamps = simulated_recording(SITE, duration_s=20.0, rate_hz=8.0, seed=0)
-    assert 140 <= len(samples) <= 160 and all(min(st.values()) == s.stamp_ns for s, st in zip(samples, stamps))
+    # 160 instants; the person is out of every view in some (112 with the floor of December 2026, 150 before it grew)
+    assert 100 <= len(samples) <= 160 and all(min(st.values()) == s.stamp_ns for s, st in zip(samples, stamps))
     est = AnalyticEstimator(SITE)
     per_frame = predict(samples, est)
     filtered = replay(samples, stamps, per_frame, SITE, est, "analytic")
     unfiltered = replay(samples, stamps, per_frame, SITE, est, "analytic", HostConfig(filter=FilterConfig(enabled=False)))
     truth = np.array([s.truth for s in samples])
     tracked = (filtered.source == "track") & (unfiltered.source == "track")
-    assert tracked.sum() >= 120
+    assert tracked.sum() >= 80
     j_pf, j_raw, j_kf = (jitter(p, truth, 0.0, tracked) for p in (per_frame, unfiltered.poses, filtered.poses))
     # Measured: per-frame 70 mm, 51 deg; host without filter 73 mm, 40 deg; with the filter 55 mm, 29 deg.
     for key in ("position_mm", "yaw_deg"):
         assert j_kf[key] < 0.9 * j_raw[key], (key, j_kf, j_raw)
         assert j_kf[key] < 0.9 * j_pf[key], (key, j_kf, j_pf)
-    # The filtered pose still follows the walk (measured 30/55 mm, 14 deg; per frame 12/23 mm, 14 deg).
-    rep = score(samples, {"tp": filtered.poses}, 0.0)["tp"]
-    assert max(rep["position_mae_mm"].values()) < 100 and rep["yaw_mae_deg"] < 20
+    # The filtered pose still follows the walk. Measured on the floor before it grew: 30/55 mm, 14 deg
+    # (per frame 12/23 mm, 14 deg); since (a walk to places one far camera sees): 85/24 mm, 32.4 deg (per frame 31.6).
+    rep = score(samples, {"tp": filtered.poses, "pf": per_frame}, 0.0)
+    assert max(rep["tp"]["position_mae_mm"].values()) < 100 and rep["tp"]["yaw_mae_deg"] < rep["pf"]["yaw_mae_deg"] + 3
 
 
 def test_views_of_different_instants_count_at_their_mean_time_and_the_pose_keeps_up_with_the_walk():
@@ -244,7 +246,7 @@ def test_views_of_different_instants_count_at_their_mean_time_and_the_pose_keeps
         v = np.gradient(truth[:, :2], t, axis=0)  # (N, 2) the walk's velocity
         speed = np.linalg.norm(v, axis=1)
         moving = (rep.source == "track") & (speed > 0.2)
-        assert moving.sum() >= 80
+        assert moving.sum() >= 60
         ahead = np.einsum("ij,ij->i", rep.poses[:, :2] - truth[:, :2], v / np.maximum(speed, 1e-9)[:, None])  # (N,) m
         lag_s = -ahead[moving].sum() / speed[moving].sum()
         assert -0.01 < lag_s < 0.03, (seed, lag_s)
