@@ -53,6 +53,13 @@ class TrackerConfig:
             Bhattacharyya distance between their colour histories is below this.
         reid_speed_mps: ... and if the remembered person, walking at this speed, could have
             reached (within ``gate_m``) where the new one stands.
+        confirm_min_support: a candidate is confirmed only if it was matched in at least this
+            share of the frames of cameras that clearly saw where it stood (``host.tracking.evidence``:
+            a false positive one camera reports where the others see nothing is not a person;
+            0 turns the rule off).
+        min_separation_m: a candidate closer than this to a confirmed person is that person, not
+            a newcomer, and two confirmed tracks that stay this close are merged
+            (``host.tracking.evidence``; 0 turns the rule off).
         restart_gap_s: a camera whose sequence number goes back is taken as restarted (its
             frames are admitted again) after this long without frames from it, when the frame
             after a refused one continues the new count, or after ``Tracker.reset_camera``;
@@ -76,6 +83,8 @@ class TrackerConfig:
     reid_d_max: float = 0.6
     reid_speed_mps: float = 1.5
     restart_gap_s: float = 1.0
+    confirm_min_support: float = 0.5
+    min_separation_m: float = 0.3
 
     def __post_init__(self) -> None:
         _check("confirm_after_s", self.confirm_after_s, 0.0, 600.0)
@@ -95,3 +104,5 @@ class TrackerConfig:
         _check("reid_d_max", self.reid_d_max, 0.0, 1.0, lo_open=True)
         _check("reid_speed_mps", self.reid_speed_mps, 0.0, 100.0)
         _check("restart_gap_s", self.restart_gap_s, 0.0, 600.0)
+        _check("confirm_min_support", self.confirm_min_support, 0.0, 1.0)
+        _check("min_separation_m", self.min_separation_m, 0.0, 2.0)

@@ -7,8 +7,8 @@ and a person unseen for 2 s is removed. This one adds:
 
 - a geometric gate: a view also needs its ground point (host.tracking.ground) within
   ``gate_m + sigma`` of the person's predicted position, sigma combining the ground point's and
-  the prediction's uncertainty; a small constant-velocity Kalman filter per track (host.filtering.pose_filter's
-  ``predict``/``update``) makes the gate follow a walking person;
+  the prediction's uncertainty; a constant-velocity Kalman filter per track (host.tracking.motion)
+  makes the gate follow a walking person;
 - joint assignment: all people of one camera frame go to tracks at once
   (``scipy.optimize.linear_sum_assignment``) on colour plus normalised geometric distance,
   infeasible pairs forbidden, so one greedy choice cannot steal another view's only match;
@@ -22,28 +22,25 @@ and a person unseen for 2 s is removed. This one adds:
   (``association.duplicate_views``: a detector's double report, a flood of replayed copies) are
   one view, the one with the most joints (counted as ``duplicate_views``);
 - time from the messages: everything runs on capture stamps and an injected ``now_ns``. A
-  camera's frames are admitted in order (``Tracker.admit``): a frame older than the newest one
-  admitted from that camera is "late", one with the same stamp or sequence number a
-  "duplicate", one whose sequence number goes back without the camera having restarted
-  "seq_backwards" (a node restart is recognised: see ``restart_gap_s``), one older than
-  ``remove_after_s`` "stale". The ordering reference of a
-  camera is its newest admitted stamp capped at the host's clock when it was admitted, so a
-  frame stamped in the future (a skewed clock, a hostile peer) cannot make that camera's real
-  frames "late";
+  camera's frames are admitted in order (``Tracker.admit``, ``DROP_REASONS``): "late", "duplicate",
+  "seq_backwards" (a node restart is recognised: ``restart_gap_s``), "stale". A camera's ordering
+  reference is its newest admitted stamp capped at the host's clock, so a frame stamped in the
+  future (a skewed clock, a hostile peer) cannot make that camera's real frames "late";
 - a cap on tracks (``max_tracks``, at most what a PoseArray may carry): confirmed people are
   never evicted for newcomers; when the tracker is full, a view that would start a candidate
   replaces the stalest candidate not seen in this frame, or, if there is none, is ignored
   (counted as ``track_cap``). A flood of fake people therefore costs candidates, never the
   output nor the people already tracked.
 
-- re-identification: a removed person is remembered for ``reid_window_s`` (colour history,
-  last position). When a candidate is confirmed and its colours match exactly one remembered
-  person (median Bhattacharyya distance between the two histories below ``reid_d_max``, the
-  next remembered person and every person present at least ``_REID_MARGIN`` further) who could
-  have walked to where it stands, it takes that person's id back. (Measured in the demo's
-  apartment: the same person after a gap 0.07-0.53, different people 0.71-0.91.) Without it, a person who stands where no working camera sees
-  them (a camera died, a corner) for more than ``remove_after_s`` comes back as someone new:
-  a new id and an identity switch for every subscriber.
+- evidence before confirmation (``host.tracking.evidence``): a candidate is confirmed only if
+  the cameras that clearly see where it stands matched it in ``confirm_min_support`` of their
+  frames (a detector's false positive one camera reports is not corroborated by the others), and
+  not within ``min_separation_m`` of a confirmed person (two people cannot stand inside each
+  other); two confirmed tracks that stay that close are one person (``prune`` merges them);
+- re-identification (``host.tracking.reid``): a removed person is remembered for
+  ``reid_window_s``; a new person whose colours clearly match one of them, and who stands where
+  they could have walked to, takes their id back. Without it, a person who stands where no
+  working camera sees them for more than ``remove_after_s`` comes back as someone new.
 
 For each confirmed person, ``view_sets`` gives the paper's set S: its latest view per camera,
 if fresh, for the GNN.
@@ -62,8 +59,10 @@ from superbody.edge.messages.observation import Observation, PersonView
 from superbody.edge.site import Site
 from superbody.host.tracking.association import FrameViews, Match, _amplitudes, _median_over_history, assign, duplicate_views
 from superbody.host.tracking.config import TrackerConfig
+from superbody.host.tracking.evidence import clearly_sees, coincident, too_close
 from superbody.host.tracking.ground import ground_points
 from superbody.host.tracking.motion import _NS_PER_S, fuse_positions, predict_positions
+from superbody.host.tracking.reid import Lost, remembered_as
 from superbody.host.tracking.track import _BINS, StampedView, Track
 
 __all__ = ["Tracker", "DROP_REASONS"]
@@ -73,8 +72,6 @@ _UNKNOWN_COST = 0.5
 # Candidates cost a little more than confirmed people, so a duplicate candidate of a person
 # does not steal that person's views when both fit.
 _CANDIDATE_COST = 0.1
-# Re-identification needs the best remembered person this much closer in colour than the next.
-_REID_MARGIN = 0.1
 
 
 class _Order(NamedTuple):
@@ -87,16 +84,6 @@ class _Order(NamedTuple):
     back_ns: int = 0  # ... and stamp
 
 
-class _Lost(NamedTuple):
-    """A removed person, remembered for re-identification."""
-
-    id: int
-    label: str
-    amp: NDArray[np.float64]  # (n, B) their last histograms as amplitudes
-    position: NDArray[np.float64] | None  # (2,) last estimated floor position
-    last_seen_ns: int
-
-
 # Why ``Tracker.admit`` refuses a frame, in the order checked.
 DROP_REASONS: Final[tuple[str, ...]] = ("wrong_site", "unknown_camera", "stale", "late", "duplicate", "seq_backwards")
 
@@ -104,6 +91,7 @@ _STATS = (
     "observations", "views", "late_dropped", "duplicate_dropped", "stale_dropped", "seq_backwards_dropped", "wrong_site",
     "unknown_camera", "too_few_joints", "track_cap", "evicted_candidates", "too_few_joints_new", "no_ground_point", "no_signature",
     "unplaced_new", "suppressed", "duplicate_views", "matched", "new_candidates", "confirmed", "removed", "dropped_candidates", "reidentified",
+    "merged",
 )
 
 
@@ -127,7 +115,7 @@ class Tracker:
         self.stats: dict[str, int] = dict.fromkeys(_STATS, 0)
         self._cameras = {c.id: c for c in site.cameras}
         self._tracks: dict[int, Track] = {}
-        self._lost: dict[int, _Lost] = {}  # removed people, oldest first, for re-identification
+        self._lost: dict[int, Lost] = {}  # removed people, oldest first, for re-identification
         self._next_id = 1
         self._order: dict[str, _Order] = {}  # per camera: what its next frame is judged against
         c = self.config
@@ -193,14 +181,17 @@ class Tracker:
             (``admit`` says why; ``stats`` counts each reason).
         """
         t = int(obs.stamp_ns)
-        if not self._admit_frame(obs, t, t if now_ns is None else int(now_ns)) or not obs.people:
+        if not self._admit_frame(obs, t, t if now_ns is None else int(now_ns)):
             return []
-        views = self._measure(obs)
+        tracks = [tr for tr in self._tracks.values() if t - tr.last_seen_ns < self._remove_ns]
+        views = self._measure(obs) if obs.people else None
+        if views is None or not len(views.idx):  # a frame that sees nobody is evidence too
+            self._count_chances(obs.camera, tracks, np.empty(0, np.intp))
         matches: list[Match | None] = [None] * len(obs.people)  # the views left None at the end were ignored
-        if len(views.idx):
-            tracks = [tr for tr in self._tracks.values() if t - tr.last_seen_ns < self._remove_ns]
+        if views is not None and len(views.idx):
             rows, cols, colour_d, geo_d, near = self._associate(t, tracks, views.amps, views.has_colour, views.ground,
                                                                 views.sigma, views.has_ground)
+            self._count_chances(obs.camera, tracks, cols)
             fused = self._update_matched(obs, t, views, tracks, rows, cols, colour_d, geo_d, matches)
             fused += self._create(obs, t, views, tracks, rows, cols, near, matches)
             self._fuse(fused, views, t)
@@ -297,6 +288,29 @@ class Tracker:
             matches[i] = Match(i, tr.id, "created")
         return fused
 
+    def _count_chances(self, camera: str, tracks: list[Track], cols: NDArray) -> None:
+        """Each placed candidate's chance to be seen in this frame, and whether it was (``host.tracking.evidence``)."""
+        idx = [j for j, tr in enumerate(tracks) if tr.state == "candidate" and tr._kf_t is not None]
+        if not idx:
+            return
+        seen = clearly_sees(self._cameras[camera], np.array([tracks[j]._kf_x[0] for j in idx]))
+        matched = set(cols.tolist())
+        for j, s in zip(idx, seen, strict=True):
+            hit = j in matched
+            tracks[j]._chances += int(hit or bool(s))
+            tracks[j]._support += int(hit)
+
+    def _may_confirm(self, tr: Track) -> bool:
+        """A candidate with its 2 s of matches is a person if its views corroborate it and it stands
+        in a room of its own (``host.tracking.evidence``)."""
+        cfg = self.config
+        if tr._support < cfg.confirm_min_support * tr._chances:
+            return False
+        if cfg.min_separation_m <= 0 or tr._kf_t is None:
+            return True
+        people = [p._kf_x[0] for p in self._tracks.values() if p.state == "confirmed" and p is not tr and p._kf_t is not None]
+        return not too_close(tr._kf_x[0], people, cfg.min_separation_m)[0]
+
     def _fuse(self, fused: list[tuple[Track, int]], views: FrameViews, t: int) -> None:
         """The ground points of the views applied to their tracks' position filters."""
         fused = [(tr, r) for tr, r in fused if views.has_ground[r]]
@@ -372,48 +386,25 @@ class Tracker:
     def _apply(self, tr: Track, camera: str, t: int, view: PersonView, hist: NDArray, amp: NDArray, has_colour: bool) -> None:
         """Record a view matched to (or starting) ``tr``; confirm it when its time has come."""
         if t - tr.last_seen_ns > self._gap_ns:
-            tr._streak_ns = t
+            tr._streak_ns, tr._chances, tr._support = t, 1, 1
         tr.last_seen_ns = max(tr.last_seen_ns, t)
         tr.hits += 1
         tr.views[camera] = StampedView(t, view)
         if has_colour:
             tr._add_histogram(hist, amp)
-        if tr.state == "candidate" and tr.last_seen_ns - tr._streak_ns >= self._confirm_ns:
+        if tr.state == "candidate" and tr.last_seen_ns - tr._streak_ns >= self._confirm_ns and self._may_confirm(tr):
             tr.state, tr.confirmed_ns = "confirmed", t
             self.stats["confirmed"] += 1
             self._reidentify(tr, t)
 
     def _reidentify(self, tr: Track, t: int) -> None:
         """Give a just-confirmed track the id of the one remembered person it clearly is, if any."""
-        cfg = self.config
         self._forget_lost(t)
-        n = min(tr._n_hist, cfg.history_q)
-        if not self._lost or n == 0:
+        others = [o for o in self._tracks.values() if o is not tr and o.state == "confirmed"]
+        lost = remembered_as(tr, t, self._lost.values(), others, self.config)
+        if lost is None:
             return
-        mine = tr._amp[:n]  # (n, B): the ring buffer's used rows
-        pos = tr.position
-        scored: list[tuple[float, int]] = []
-        for lost in self._lost.values():
-            if pos is not None and lost.position is not None:
-                reach = cfg.gate_m + cfg.reid_speed_mps * (t - lost.last_seen_ns) / _NS_PER_S
-                if np.linalg.norm(pos - lost.position) > reach:
-                    continue
-            # d = sqrt(1 - BC) for every pair of histories; the median is robust to odd views
-            d = np.sqrt(np.clip(1.0 - mine @ lost.amp.T, 0.0, 1.0))  # (n, n_lost)
-            scored.append((float(np.median(d)), lost.id))
-        scored.sort()
-        if not scored or scored[0][0] >= cfg.reid_d_max or (len(scored) > 1 and scored[1][0] - scored[0][0] < _REID_MARGIN):
-            return
-        # Lighting differs between cameras, so the scale of "same colours" does too: the people
-        # present now are certainly not the lost one, and must all look clearly less like it.
-        for other in self._tracks.values():
-            m = min(other._n_hist, cfg.history_q)
-            if other is tr or other.state != "confirmed" or m == 0:
-                continue
-            d = np.sqrt(np.clip(1.0 - mine @ other._amp[:m].T, 0.0, 1.0))
-            if float(np.median(d)) - scored[0][0] < _REID_MARGIN:
-                return
-        lost = self._lost.pop(scored[0][1])
+        del self._lost[lost.id]
         del self._tracks[tr.id]
         tr.id, tr.label = lost.id, lost.label
         self._tracks[tr.id] = tr
@@ -454,18 +445,29 @@ class Tracker:
         return ok
 
     def prune(self, now_ns: int) -> list[Track]:
-        """Remove tracks unseen for ``remove_after_s`` and return them."""
+        """Remove tracks unseen for ``remove_after_s``, and the younger of two confirmed tracks that
+        stood inside each other for ``MERGE_AFTER_S`` (``host.tracking.evidence``); return them."""
+        merged = self._merge_coincident(now_ns)
         gone = [tr for tr in self._tracks.values() if now_ns - tr.last_seen_ns >= self._remove_ns]
         for tr in gone:
             del self._tracks[tr.id]
             self.stats["removed" if tr.state == "confirmed" else "dropped_candidates"] += 1
             n = min(tr._n_hist, self.config.history_q)
             if tr.state == "confirmed" and n > 0 and self._reid_ns > 0:
-                self._lost[tr.id] = _Lost(tr.id, tr.label, tr._amp[:n].copy(), tr.position, tr.last_seen_ns)
+                self._lost[tr.id] = Lost(tr.id, tr.label, tr._amp[:n].copy(), tr.position, tr.last_seen_ns)
         while len(self._lost) > self.config.max_tracks:  # bounded whatever the input
             del self._lost[next(iter(self._lost))]
         self._forget_lost(now_ns)
-        return gone
+        return merged + gone
+
+    def _merge_coincident(self, now_ns: int) -> list[Track]:
+        """The younger of two confirmed tracks closer than ``min_separation_m`` for ``MERGE_AFTER_S``, removed."""
+        people = [tr for tr in self._tracks.values() if tr.state == "confirmed"]
+        merged = coincident(people, now_ns, self.config.min_separation_m) if self.config.min_separation_m > 0 else []
+        for tr in merged:
+            del self._tracks[tr.id]
+        self.stats["merged"] += len(merged)
+        return merged
 
     def people(self, now_ns: int) -> list[Track]:
         """Confirmed tracks still alive at ``now_ns``, oldest first."""

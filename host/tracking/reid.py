@@ -1,0 +1,73 @@
+"""Re-identification: whether a just-confirmed track is a person the tracker removed a moment ago.
+
+A removed person is remembered (``Lost``) for ``TrackerConfig.reid_window_s``. A new person takes a
+remembered person's id back when their colours match that one remembered person clearly (median
+Bhattacharyya distance between the two histories below ``reid_d_max``, the next remembered
+person and every person present at least ``REID_MARGIN`` further) and that person could have
+walked to where the new one stands. See ``host.tracking.tracker``'s module docstring.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from superbody.host.tracking.config import TrackerConfig
+from superbody.host.tracking.motion import _NS_PER_S
+from superbody.host.tracking.track import Track
+
+__all__ = ["Lost", "REID_MARGIN", "remembered_as"]
+
+# Re-identification needs the best remembered person this much closer in colour than the next.
+REID_MARGIN = 0.1
+
+
+class Lost(NamedTuple):
+    """A removed person, remembered for re-identification."""
+
+    id: int
+    label: str
+    amp: NDArray[np.float64]  # (n, B) their last histograms as amplitudes
+    position: NDArray[np.float64] | None  # (2,) last estimated floor position
+    last_seen_ns: int
+
+
+def remembered_as(tr: Track, t: int, lost: Iterable[Lost], present: Iterable[Track], cfg: TrackerConfig) -> Lost | None:
+    """The one remembered person a just-confirmed track clearly is, or None.
+
+    Args:
+        tr: the track just confirmed at ``t`` (capture time, ns).
+        lost: the people remembered.
+        present: the other confirmed people now (certainly not the lost one).
+        cfg: the tracker's parameters.
+    """
+    n = min(tr._n_hist, cfg.history_q)
+    if n == 0:
+        return None
+    mine = tr._amp[:n]  # (n, B): the ring buffer's used rows
+    pos = tr.position
+    scored: list[tuple[float, Lost]] = []
+    for person in lost:
+        if pos is not None and person.position is not None:
+            reach = cfg.gate_m + cfg.reid_speed_mps * (t - person.last_seen_ns) / _NS_PER_S
+            if np.linalg.norm(pos - person.position) > reach:
+                continue
+        # d = sqrt(1 - BC) for every pair of histories; the median is robust to odd views
+        d = np.sqrt(np.clip(1.0 - mine @ person.amp.T, 0.0, 1.0))  # (n, n_lost)
+        scored.append((float(np.median(d)), person))
+    scored.sort(key=lambda s: s[0])
+    if not scored or scored[0][0] >= cfg.reid_d_max or (len(scored) > 1 and scored[1][0] - scored[0][0] < REID_MARGIN):
+        return None
+    # Lighting differs between cameras, so the scale of "same colours" does too: the people
+    # present now are certainly not the lost one, and must all look clearly less like it.
+    for other in present:
+        m = min(other._n_hist, cfg.history_q)
+        if m == 0:
+            continue
+        d = np.sqrt(np.clip(1.0 - mine @ other._amp[:m].T, 0.0, 1.0))
+        if float(np.median(d)) - scored[0][0] < REID_MARGIN:
+            return None
+    return scored[0][1]
