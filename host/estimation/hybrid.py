@@ -64,8 +64,8 @@ class HybridCalibration:
             e.g. a yaw convention of the site's ground truth that differs from the shoulder line.
         net_bias: per camera count 1, 2, 3+, the network pose's typical error (x m, y m, yaw
             rad; the median of its errors on held-out real data), subtracted from it before the
-            fusion (``models.hybrid_fit.NET_DEBIAS``: y only; on dev.json's spatial cross-validation the
-            network's three-camera y is too large by about 0.1 m in every floor region).
+            fusion (``models.hybrid_fit.NET_DEBIAS`` says which axes are measured: since December
+            2026 none, as dev.json's offsets did not carry over to another recording).
         source: how the numbers were measured (free text, for the model card).
     """
 

@@ -14,6 +14,7 @@ from superbody.edge.site import load_site  # noqa: E402
 from superbody.host.estimation.hybrid import fuse  # noqa: E402
 from superbody.models.evaluation.crossval import spatial_folds  # noqa: E402
 from superbody.models.hybrid_fit import (  # noqa: E402
+    DEBIAS,
     NET_DEBIAS,
     TRUST_GRID,
     fit_analytic,
@@ -57,6 +58,18 @@ def test_std_scale_needs_data():
         fit_std_scale(np.zeros((3, 3)), np.ones((3, 3)), np.zeros((3, 3)))
 
 
+def test_no_offset_of_one_recording_is_removed_by_default():
+    """dev.json's geometry yaw offset and network y offset did not hold on the paper's test recording."""
+    assert DEBIAS == NET_DEBIAS == (False, False, False)
+    rng = np.random.default_rng(9)
+    n = 600
+    cams = rng.integers(1, 4, n)
+    truth = np.zeros((n, 3))
+    biased = truth + [0.0, 0.1, 0.07] + rng.normal(0, 0.02, (n, 3))
+    _, cal = fit_calibration(biased, np.full((n, 3), 0.02), biased, np.ones(n, bool), truth, cams)
+    assert np.array(cal.net_bias).tolist() == np.array(cal.analytic_bias).tolist() == [[0.0] * 3] * 3
+
+
 def test_fit_analytic_by_camera_count_and_pair():
     rng = np.random.default_rng(2)
     n = 3000
@@ -80,7 +93,7 @@ def test_fit_analytic_measures_and_removes_the_yaw_bias_but_not_the_position_bia
     truth = np.column_stack([np.zeros((n, 2)), rng.uniform(-np.pi, np.pi, n)])
     pred = truth + bias[cams - 1] + rng.normal(0, 0.05, (n, 3))
     pred[:, 2] = np.angle(np.exp(1j * pred[:, 2]))
-    cal = fit_analytic(pred, np.ones(n, bool), truth, cams)
+    cal = fit_analytic(pred, np.ones(n, bool), truth, cams, debias=(False, False, True))  # the mechanism, for a site that needs it
     b = np.array(cal.analytic_bias)
     np.testing.assert_allclose(b[:, 2], bias[:, 2], atol=0.01)
     np.testing.assert_array_equal(b[:, :2], 0.0)  # position: measured on one part of a floor, wrong on another
@@ -94,9 +107,9 @@ def test_fit_analytic_measures_and_removes_the_yaw_bias_but_not_the_position_bia
 
 def test_the_networks_y_bias_is_measured_per_camera_count_and_removed_before_the_trust_is_fitted():
     """Three cameras: an otherwise accurate network whose y errs by +0.1 m, against a geometry of
-    0.05 m. Its bias is measured (y only, ``NET_DEBIAS``), and the network less it earns the
-    y trust that the biased one could not."""
-    assert NET_DEBIAS == (False, True, False)
+    0.05 m. Where its bias is measured (the mechanism; ``NET_DEBIAS`` turns it on for no axis
+    since dev.json's offset did not carry over), the network less it earns the y trust that the
+    biased one could not."""
     rng = np.random.default_rng(6)
     n = 1500
     cams = rng.integers(1, 4, n)
@@ -104,12 +117,13 @@ def test_the_networks_y_bias_is_measured_per_camera_count_and_removed_before_the
     offset = np.array([[0.05, 0.0, 0.0], [0.0, -0.03, 0.0], [0.2, 0.1, 0.1]])  # x m, y m, yaw rad per count
     net = truth + offset[cams - 1] + rng.normal(0, 0.02, (n, 3))
     geo = truth + rng.normal(0, 0.05, (n, 3))
-    np.testing.assert_allclose(fit_net_bias(net, truth, cams), [[0, 0, 0], [0, -0.03, 0], [0, 0.1, 0]], atol=0.005)
+    y_only = (False, True, False)
+    np.testing.assert_allclose(fit_net_bias(net, truth, cams, y_only), [[0, 0, 0], [0, -0.03, 0], [0, 0.1, 0]], atol=0.005)
     pair = np.ones(n, bool)
-    _, cal = fit_calibration(net, np.full((n, 3), 0.02), geo, pair, truth, cams)
+    _, cal = fit_calibration(net, np.full((n, 3), 0.02), geo, pair, truth, cams, net_debias=y_only)
     np.testing.assert_allclose(np.array(cal.net_bias)[:, 1], [0.0, -0.03, 0.1], atol=0.005)
     assert cal.net_trust[2][1] >= 1  # y: the debiased network is trusted
-    scale, _ = fit_calibration(net, np.full((n, 3), 0.02), geo, pair, truth, cams)
+    scale, _ = fit_calibration(net, np.full((n, 3), 0.02), geo, pair, truth, cams, net_debias=y_only)
     fused, _, _ = hybrid_poses(net, scaled_std(np.full((n, 3), 0.02), scale, cams), geo, pair, cams, cal, load_site(WTF_SITE))
     three = cams == 3
     err = lambda p, axis: np.abs(p[three, axis] - truth[three, axis]).mean()  # noqa: E731
@@ -214,7 +228,7 @@ def test_hybrid_falls_back_to_geometry_off_the_floor():
     cal = fit_analytic(np.zeros((30, 3)) + 0.01, np.ones(30, bool), np.zeros((30, 3)), np.full(30, 2))
     pose, std, source = hybrid_poses(net, np.full((2, 3), 0.1), geo, np.array([True, False]), np.array([2, 1]), cal, site)
     assert source.tolist() == ["analytic", "onnx"]
-    np.testing.assert_allclose(pose, [[0.1, 0.1, 0.09], [0.0, 0.0, 0.0]])  # the geometry's yaw less its measured bias (0.01)
+    np.testing.assert_allclose(pose, [[0.1, 0.1, 0.1], [0.0, 0.0, 0.0]])  # the geometry's pose as it is (no bias removed)
 
 
 def test_spatial_folds_are_regions_with_a_buffer():
