@@ -8,6 +8,23 @@ is unwrapped next to the state first, so a person turning through +-pi gives a s
 Process noise: piecewise-constant white acceleration (Bar-Shalom), per axis
 
     Q = sigma_a^2 [[dt^4/4, dt^3/2], [dt^3/2, dt^2]]
+
+Beyond the plain filter (each can be turned off in ``FilterConfig``):
+
+- **Walking direction as a yaw prior.** People mostly face where they walk: in both of the
+  paper's recordings torso yaw and walking direction differ by 17-20 degrees on average while
+  the person moves. So while a track moves faster than ``walk_min_speed_mps``, the direction of
+  its velocity is a second, weak measurement of its yaw, of variance ``walk_yaw_std_rad``^2 (the
+  spread of yaw about the walking direction) plus the velocity direction's own (speed variance
+  over speed squared). That spread is one fact about a walk, not one per frame: the prior counts
+  as independent once per ``walk_prior_time_s``, so at a frame interval dt its variance is
+  multiplied by ``walk_prior_time_s / dt``. A prior weighted by its uncertainty, never a
+  replacement: a person who walks sideways or backwards is still measured by the views.
+- **No single measurement moves a track far.** A measurement more than ``outlier_sigma``
+  standard deviations of its innovation from the prediction (one bad view: a 180-degree yaw
+  flip, a position from the wrong person) counts with its variance multiplied by d / k (d its
+  distance in standard deviations, k = ``outlier_sigma``; Huber's weight): its pull on the state
+  is bounded, while a change that persists still wins over a few frames.
 """
 
 from __future__ import annotations
@@ -56,6 +73,13 @@ class FilterConfig:
         init_speed_std_mps: 1-sigma of the unknown speed at the first measurement, m/s.
         init_yaw_rate_std_radps: 1-sigma of the unknown yaw rate at the first measurement.
         reset_after_s: a gap longer than this between measurements restarts the filter.
+        walk_yaw_std_rad: 1-sigma of torso yaw about the walking direction while walking (module
+            docstring: 17-20 deg mean absolute difference in both recordings, about 23 deg as a
+            Gaussian's sigma; 25 deg); 0 turns the walking prior off.
+        walk_min_speed_mps: the walking prior applies above this estimated speed.
+        walk_prior_time_s: the walking prior counts as independent once per this long.
+        outlier_sigma: measurements beyond this many innovation sigmas are down-weighted
+            (module docstring); 0 turns it off.
     """
 
     enabled: bool = True
@@ -66,6 +90,10 @@ class FilterConfig:
     init_speed_std_mps: float = 1.0
     init_yaw_rate_std_radps: float = 2.0
     reset_after_s: float = 2.0
+    walk_yaw_std_rad: float = math.radians(25.0)
+    walk_min_speed_mps: float = 0.3
+    walk_prior_time_s: float = 1.0
+    outlier_sigma: float = 3.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.enabled, bool):
@@ -77,6 +105,10 @@ class FilterConfig:
         _check("init_speed_std_mps", self.init_speed_std_mps, 0.0, 100.0)
         _check("init_yaw_rate_std_radps", self.init_yaw_rate_std_radps, 0.0, 100.0)
         _check("reset_after_s", self.reset_after_s, 0.0, 3600.0)
+        _check("walk_yaw_std_rad", self.walk_yaw_std_rad, 0.0, math.pi, lo_open=False)
+        _check("walk_min_speed_mps", self.walk_min_speed_mps, 0.0, 10.0)
+        _check("walk_prior_time_s", self.walk_prior_time_s, 0.0, 60.0)
+        _check("outlier_sigma", self.outlier_sigma, 0.0, 100.0, lo_open=False)
 
 
 @dataclass(frozen=True, eq=False)
@@ -318,11 +350,14 @@ def _step(filters: Sequence[PoseFilter], t_ns: NDArray, pose: NDArray, std: NDAr
     ``kalman.cv_predict`` and ``kalman.cv_update`` on (n, 3) axes. Same numbers as the textbook
     6 x 6 form (tests/host/filtering/test_pose_filter.py and test_kalman.py).
     """
+    dt = (np.asarray(t_ns, dtype=np.int64) - np.array([f._t for f in filters], dtype=np.int64)) * _NS  # (n,)
     pos, rate, cov = _predicted(filters, t_ns)
     # Update with z = the measured positions, the yaw unwrapped next to the predicted yaw (the
     # innovation stays in (-pi, pi])
     z = np.column_stack([pose[:, 0], pose[:, 1], pos[:, 2] + wrap_angle(wrap_angle(pose[:, 2]) - pos[:, 2])])  # (n, 3)
-    pos, rate, cov = cv_update(pos, rate, cov, z, np.square(std))
+    gate = np.array([f.config.outlier_sigma for f in filters])[:, None]  # (n, 1)
+    pos, rate, cov = cv_update(pos, rate, cov, z, _huber(np.square(std), z - pos, cov.p00, gate))
+    pos, rate, cov = _walking_prior(filters, pos, rate, cov, dt)
     pos[:, 2] = wrap_angle(pos[:, 2])
     X, P = _packed(pos, rate, cov)
     out = []
@@ -330,3 +365,36 @@ def _step(filters: Sequence[PoseFilter], t_ns: NDArray, pose: NDArray, std: NDAr
         f._t, f._x, f._P = int(t_ns[k]), X[k], P[k]
         out.append(f._pose(f._t, f._x, f._P))
     return out
+
+
+def _huber(R: NDArray, innovation: NDArray, p00: NDArray, k: NDArray) -> NDArray:
+    """Measurement variances (n, 3), each multiplied by d / k where its innovation lies d > k
+    standard deviations (of the innovation, p00 + R) from the prediction; k <= 0: unchanged."""
+    d = np.abs(innovation) / np.sqrt(p00 + R)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where((k > 0) & (d > k), R * d / k, R)
+
+
+def _walking_prior(filters: Sequence[PoseFilter], pos: NDArray, rate: NDArray, cov: AxisCov, dt: NDArray) -> tuple[NDArray, NDArray, AxisCov]:
+    """The yaw of each moving filter updated with its walking direction (module docstring)."""
+    c = [f.config for f in filters]
+    sigma = np.array([x.walk_yaw_std_rad for x in c])
+    speed = np.hypot(rate[:, 0], rate[:, 1])  # (n,)
+    moving = (sigma > 0) & (speed > np.array([x.walk_min_speed_mps for x in c])) & (dt > 0)
+    if not moving.any():
+        return pos, rate, cov
+    i = np.flatnonzero(moving)
+    heading = np.arctan2(rate[i, 1], rate[i, 0])
+    # the heading's own variance: the speed's variance across the direction, over speed^2
+    var_dir = 0.5 * (cov.p11[i, 0] + cov.p11[i, 1]) / np.square(speed[i])
+    scale = np.array([c[j].walk_prior_time_s for j in i]) / dt[i]
+    R = np.square(sigma[i]) * np.maximum(scale, 1.0) + var_dir
+    z = pos[i, 2] + wrap_angle(heading - pos[i, 2])  # unwrapped next to the yaw
+    yaw_cov = AxisCov(*(f[i, 2] for f in cov))
+    p, r, yc = cv_update(pos[i, 2], rate[i, 2], yaw_cov, z, R)
+    pos, rate = pos.copy(), rate.copy()
+    pos[i, 2], rate[i, 2] = p, r
+    fields = [f.copy() for f in cov]
+    for f, new in zip(fields, yc, strict=True):
+        f[i, 2] = new
+    return pos, rate, AxisCov(*fields)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import cast
 
 import numpy as np
 import pytest
@@ -228,7 +229,8 @@ def test_the_batched_step_is_the_textbook_six_state_filter():
     from superbody.host.filtering.pose_filter import _step
 
     rng = np.random.default_rng(5)
-    filters = [PoseFilter() for _ in range(5)]
+    plain = FilterConfig(walk_yaw_std_rad=0.0, outlier_sigma=0.0)  # the two additions off: the textbook filter
+    filters = [PoseFilter(plain) for _ in range(5)]
     for f in filters:
         f.update(0, *rng.normal(0, 2, 2), rng.uniform(-math.pi, math.pi))
         for j in range(1, 6):  # build up rates and position-rate covariances
@@ -281,3 +283,47 @@ def test_predict_many_is_the_textbook_prediction_of_each_filter():
         predict_many([filters[0], PoseFilter()], [0, 0])
     with pytest.raises(ValueError, match="must match"):
         predict_many(filters, [0])
+
+
+def _walk(cfg: FilterConfig, yaw_measured: float, yaw_std_deg: float, seconds: float = 4.0, fps: float = 15.0) -> float:
+    """A person walking along +x at 1 m/s, measured with a constant yaw: the filtered yaw at the end, degrees."""
+    f = PoseFilter(cfg)
+    for k in range(round(seconds * fps)):
+        t = k / fps
+        f.update(round(t * S), t, 0.0, yaw_measured, (0.05, 0.05, math.radians(yaw_std_deg)))
+    return math.degrees(f.predict_to(cast(int, f.stamp_ns)).yaw)
+
+
+@pytest.mark.parametrize("yaw_std_deg, lo, hi", [(90.0, 12.0, 30.0), (30.0, 33.0, 39.0)])
+def test_walking_direction_pulls_a_measured_yaw_by_its_uncertainty_never_replacing_it(yaw_std_deg, lo, hi):
+    # Walking along 0 deg, yaw measured at 40 deg. The filter takes the 15 measurements a second
+    # as independent (information 15 / sigma^2 a second), the prior as one of 25 deg a second:
+    # a poorly measured yaw (90 deg) is pulled about halfway, a fair one (30 deg) a few degrees.
+    assert _walk(FilterConfig(walk_yaw_std_rad=0.0), math.radians(40), yaw_std_deg) == pytest.approx(40, abs=0.5)
+    got = _walk(FilterConfig(), math.radians(40), yaw_std_deg)
+    assert lo < got < hi
+    # the frame rate does not change the prior's weight against measurements of the same information
+    fast = _walk(FilterConfig(), math.radians(40), yaw_std_deg * math.sqrt(2), fps=30.0)
+    assert fast == pytest.approx(got, abs=3)
+
+
+def test_standing_still_gives_no_walking_prior():
+    f = PoseFilter()
+    for k in range(45):
+        f.update(k * S // 15, 1.0, 2.0, math.radians(70), (0.05, 0.05, math.radians(30)))
+    assert math.degrees(f.predict_to(f.stamp_ns).yaw) == pytest.approx(70, abs=0.5)
+
+
+@pytest.mark.parametrize("outlier_sigma, moved_max_m", [(3.0, 0.25), (0.0, None)])
+def test_one_bad_measurement_does_not_move_a_track_far(outlier_sigma, moved_max_m):
+    f = PoseFilter(FilterConfig(outlier_sigma=outlier_sigma, walk_yaw_std_rad=0.0))
+    for k in range(30):  # standing at the origin, well measured
+        f.update(k * S // 15, 0.0, 0.0, 0.0, (0.05, 0.05, 0.1))
+    p = f.update(30 * S // 15, 2.0, 0.0, math.pi, (0.05, 0.05, 0.1))  # one view from somebody else, 2 m off, facing back
+    if moved_max_m is None:
+        assert p.x > 1.0  # the plain filter believes it
+    else:
+        assert p.x < moved_max_m and abs(p.yaw) < math.radians(60)
+    for k in range(31, 60):  # but a real move, kept up, is followed within a second or two
+        p = f.update(k * S // 15, 2.0, 0.0, 0.0, (0.05, 0.05, 0.1))
+    assert p.x > 1.9
