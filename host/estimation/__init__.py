@@ -11,11 +11,14 @@ This module is the registry: ``build_estimator(site, name, model)`` by name, and
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 from superbody.edge.site import Site
 
-__all__ = ["ESTIMATORS", "default_model", "build_estimator"]
+__all__ = ["ESTIMATORS", "default_model", "build_estimator", "no_model_message"]
+
+log = logging.getLogger("superbody.host")
 
 ESTIMATORS = ("auto", "hybrid", "onnx", "analytic")
 
@@ -35,10 +38,13 @@ def build_estimator(site: Site, kind: str = "auto", model: str | Path | None = N
 
     Kinds: ``"hybrid"`` (the network fused with geometry, host.estimation.hybrid; the model must carry a
     hybrid calibration), ``"onnx"`` (the network alone), ``"analytic"`` (geometry alone), and
-    ``"auto"``: hybrid when the model carries a calibration, else the network alone.
+    ``"auto"``: hybrid when the model carries a calibration, else the network alone; for a site
+    with no model (a new site, nothing trained yet) geometry alone, said once as a warning
+    (``no_model_message``: how to train one).
 
     Raises:
-        ValueError: unknown kind (listing the valid ones), or no model for the site.
+        ValueError: unknown kind (listing the valid ones), or no model for the site with
+            ``"hybrid"`` or ``"onnx"``.
         host.estimation.estimator.ModelMismatchError: the model does not fit the site.
     """
     if kind == "analytic":
@@ -48,9 +54,13 @@ def build_estimator(site: Site, kind: str = "auto", model: str | Path | None = N
     if kind not in ESTIMATORS:
         raise ValueError(f"unknown estimator {kind!r}; valid estimators: {', '.join(ESTIMATORS)}")
     path = Path(model) if model else default_model(site)
+    if path is None and kind == "auto":
+        from superbody.host.estimation.analytic import AnalyticEstimator
+
+        log.warning("%s", no_model_message(site))
+        return AnalyticEstimator(site), "analytic"
     if path is None:
-        raise ValueError(f"no model given and no shipped model models/{site.name}.fp32.onnx or .int8.onnx; "
-                         "pass --model M.onnx or --estimator analytic")
+        raise ValueError(f"--estimator {kind}: {no_model_message(site)}")
     if not path.is_file():
         raise ValueError(f"--model {path}: no such file")
     from superbody.host.estimation.estimator import ModelMismatchError, OnnxEstimator
@@ -66,3 +76,11 @@ def build_estimator(site: Site, kind: str = "auto", model: str | Path | None = N
     if kind == "hybrid" or (kind == "auto" and net.has_std and META_HYBRID in net.metadata):
         return HybridEstimator(net, site), f"hybrid:{path.name}"
     return net, f"onnx:{path.name}"
+
+
+def no_model_message(site: Site) -> str:
+    """What a host on a site without a model runs, and the commands that give the site one."""
+    return (f"site {site.name!r} has no model (no --model, no shipped models/{site.name}.fp32.onnx): running geometry alone "
+            f"(--estimator analytic: every pose triangulated from the views; no network). To train one from the site file: "
+            f"superbody train --site SITE.toml --geometry --name {site.name}, then pass --model build/models/{site.name}.fp32.onnx "
+            f"(docs/deploy.md)")
