@@ -37,6 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     """Add ``eval``, ``crossval`` and ``coverage``."""
     _add_eval(sub)
     _register_crossval(sub)
+    _register_degraded(sub)
     _register_coverage(sub)
 
 
@@ -90,6 +91,40 @@ def _register_crossval(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--truth-offset", type=float, default=None, help="chest-tracker offset of the file's truth, metres (default: the dataset's)")
     p.add_argument("--json-out", help="write the reports as JSON")
     p.set_defaults(func=_run_crossval)
+
+
+def _run_degraded(args: argparse.Namespace) -> int:
+    from superbody.models.evaluation.degraded import format_report, run
+
+    try:
+        site = load_site(args.site)
+        for flag, path in (("--cv", args.cv), ("--dataset", args.dataset)):
+            if not path.is_file():
+                raise ValueError(f"{flag} {path}: no such file")
+        if not args.models.is_dir():
+            raise ValueError(f"--models {args.models}: no such folder")
+        report = run(args.cv, args.models, args.dataset, site, seed=args.seed, progress=lambda m: print(m, file=sys.stderr))
+    except (ValueError, SiteError, OSError, KeyError) as e:
+        print(f"superbody crossval-degraded: error: {e}", file=sys.stderr)
+        return 2
+    print(f"spatial cross-validation on {args.dataset}, plain and with degraded views, per view-quality bucket:")
+    print(format_report(report))
+    if args.json_out:
+        Path(args.json_out).write_text(json.dumps(report, indent=1) + "\n")
+    return 0
+
+
+def _register_degraded(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("crossval-degraded",
+                       help="the spatial cross-validation's fold models on their held-out samples, plain and with the views made "
+                            "as hard as far, cut-off cameras make them, per view-quality bucket")
+    p.add_argument("--cv", type=Path, required=True, metavar="CV.npz", help="superbody crossval --split space --predictions-out's file")
+    p.add_argument("--models", type=Path, required=True, metavar="DIR", help="its fold models (crossval --temporal --models-out DIR)")
+    p.add_argument("--dataset", type=Path, required=True, metavar="PATH.json", help="the WheresTheFellow file the cross-validation used")
+    p.add_argument("--site", type=Path, default=site_path(_DEFAULT_SITE), metavar="SITE.toml", help="site file (default: the shipped wtf-apartment)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the degradations (default 0)")
+    p.add_argument("--json-out", type=Path, metavar="F", help="write the per-bucket report as JSON")
+    p.set_defaults(func=_run_degraded)
 
 
 def _run_coverage(args: argparse.Namespace) -> int:

@@ -99,6 +99,18 @@ def test_calibrate_hybrid_writes_the_model_that_the_host_then_runs_as_hybrid(tin
     assert live["settings"] == [{}, {"filter.accel_std_mps2": 0.5}]
     assert live["reports"]["live defaults"] == cv["hybrid temporal"]
     assert live["reports"]["live filter.accel_std_mps2=0.5"]["position_mae_mm"] != cv["hybrid temporal"]["position_mae_mm"]
+    # the degraded-view cross-validation runs on those fold models: every sample plain, and once per degradation
+    r = _cli("crossval-degraded", "--cv", str(npz), "--models", str(tmp_path / "folds"), "--dataset", str(dev_json),
+             "--json-out", str(tmp_path / "degraded.json"))
+    assert r.returncode == 0, r.stderr[-2000:]
+    deg = json.loads((tmp_path / "degraded.json").read_text())
+    assert deg["plain"]["all"]["samples"] == 225 and deg["plain"]["all"]["hybrid"]["failed"] == 0
+    multi = int((z["views"] >= 2).sum())
+    assert 3 * 225 <= deg["degraded"]["all"]["samples"] <= 3 * 225 + multi  # a cut may leave nothing of a one-view sample
+    assert deg["degraded"]["kind drop_camera"]["samples"] == multi
+    assert deg["degraded"]["one view"]["samples"] > deg["plain"]["one view"]["samples"]
+    within = deg["degraded"]["all"]["hybrid_within_1_sigma"]
+    assert all(0 < w < 1 for w in within) and "| one far view |" in r.stdout
     assert np.isfinite(z["predictions_int8"]).all() and (z["std_int8"] > 0).all()
     drift = z["predictions_int8"] - z["predictions"]
     drift[:, 2] = np.angle(np.exp(1j * drift[:, 2]))  # yaw wrapped
