@@ -247,8 +247,17 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
         hybrid_fit.write_calibration(m, *fits[kind])
         print(f"wrote the {'int8 ' if kind == 'int8' else ''}calibration into {m}"
               + (" (int8 model, but no int8 predictions in --cv: the fp32 calibration)" if quantised[m] and kind == "fp32" else ""))
+    # Does each constant hold? The same fit on each fold's complement (for --split space: four of five floor regions).
+    per_fold = []
+    for k in np.unique(fold):
+        keep = fold != k
+        s_k, c_k = hybrid_fit.fit_calibration(net[keep], std[keep], analytic[keep], pair[keep], truth[keep], cams[keep])
+        per_fold.append({"fold": int(k), "std_scale": s_k.tolist(), "net_trust": [list(r) for r in c_k.net_trust],
+                         "analytic_std": [list(r) for r in c_k.analytic_std]})
+    print("fitted without each fold, trust (x, y, yaw) by cameras: " + " | ".join(
+        f"fold {f['fold']}: " + "; ".join(",".join(f"{v:g}" for v in row) for row in f["net_trust"]) for f in per_fold))
     if args.json_out is not None:
-        doc = {"std_scale": scale.tolist(), "calibration": json.loads(cal.to_json()), "coverage": coverage,
+        doc = {"std_scale": scale.tolist(), "calibration": json.loads(cal.to_json()), "coverage": coverage, "per_fold": per_fold,
                "sources": {s: int((source == s).sum()) for s in ("hybrid", "onnx", "analytic")}, "reports": reports, "truth_offset_m": offset,
                "int8_vs_fp32_percent": int8_change,
                "int8": {"std_scale": fits["int8"][0].tolist(), "calibration": json.loads(fits["int8"][1].to_json())} if has_int8 else None}
