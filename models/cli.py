@@ -72,6 +72,21 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
     h.add_argument("--model", type=Path, action="append", default=[], metavar="M.onnx", help="model to write the calibration into (repeatable)")
     h.add_argument("--json-out", type=Path, metavar="F", help="write the calibration, coverage and scores as JSON")
     h.set_defaults(func=_run_calibrate_hybrid)
+    hs = csub.add_parser(
+        "hybrid-sim",
+        help="fit the hybrid estimator's uncertainties on simulation of the site (no real data) and write them into models",
+        description=(
+            "For a site with no labelled real data: simulate people in the site's cameras (a seed no training used), "
+            "run each --model and geometry on them, fit the hybrid calibration as calibrate hybrid does (sigma scale, "
+            "geometry sigmas, trust per camera count and axis) and write it into each --model (models/sim_calibration.py)."
+        ),
+    )
+    hs.add_argument("--site", type=Path, required=True, metavar="SITE.toml", help="the site the models were trained for")
+    hs.add_argument("--model", type=Path, action="append", required=True, metavar="M.onnx", help="model to calibrate (repeatable)")
+    hs.add_argument("--samples", type=_samples, default=4000, help="simulated people to fit on, 500-100000 (default 4000)")
+    hs.add_argument("--seed", type=int, default=7_2026, help="simulation seed (default 72026, no training's)")
+    hs.add_argument("--json-out", type=Path, metavar="F", help="write each model's calibration and scores as JSON")
+    hs.set_defaults(func=_run_calibrate_hybrid_sim)
     from superbody.edge.calibration import cli as calibration_cli  # board, intrinsics, oak-intrinsics; OpenCV loads on run
 
     calibration_cli.register(csub)
@@ -153,6 +168,40 @@ def _run_calibrate_from_dataset(args: argparse.Namespace) -> int:
     except OSError as e:
         return _fail(command, f"{e.filename}: {e.strerror or e}")
     _print_calibration(written, fits, errors, args.out)
+    return 0
+
+
+def _tty() -> bool:
+    import sys
+
+    return sys.stderr.isatty()
+
+
+def _samples(text: str) -> int:
+    v = int(text)
+    if not 500 <= v <= 100_000:
+        raise argparse.ArgumentTypeError(f"must be in [500, 100000], got {text}")
+    return v
+
+
+def _run_calibrate_hybrid_sim(args: argparse.Namespace) -> int:
+    from superbody.edge.site import SiteError, load_site
+    from superbody.host.estimation.estimator import ModelMismatchError
+    from superbody.models.sim_calibration import calibrate_on_simulation, format_fits
+
+    command = "calibrate hybrid-sim"
+    try:
+        site = load_site(args.site)
+        for m in args.model:
+            if not m.is_file():
+                raise ValueError(f"--model {m}: no such file")
+        fits = calibrate_on_simulation(site, args.model, args.samples, args.seed, progress=_tty())
+    except (SiteError, ValueError, ModelMismatchError) as e:
+        return _fail(command, str(e))
+    print(format_fits(fits))
+    if args.json_out is not None:
+        doc = {p: {**f, "calibration": json.loads(f["calibration"].to_json())} for p, f in fits.items()}
+        args.json_out.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
     return 0
 
 

@@ -87,5 +87,6 @@ $SB eval --dataset "$DEV" --site "$SITE" --estimator analytic --temporal --laten
 $SB coverage --site "$SITE" --model models/wtf-apartment.int8.onnx --dataset "$DEV" --out models/card --json-out "$OUT/coverage.json"
 $SB demo --duration 60 --clock-scale 3 --port 17480 --no-table --json-summary "$OUT/demo.json"
 .venv/bin/python -m benchmarks.model_bench --model models/wtf-apartment.int8.onnx --json-out "$OUT/bench-model.json" | tee "$OUT/bench-model.txt"
+.venv/bin/python scripts/sim_vs_dataset.py --dataset "$DEV" --json-out "$OUT/sim-vs-dev.json" > "$OUT/sim-vs-dev.txt" 2>&1
 .venv/bin/python scripts/model_card.py --out-dir "$OUT" --card models/MODEL_CARD.md
 echo "models and card written; see models/MODEL_CARD.md"

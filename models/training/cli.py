@@ -90,6 +90,11 @@ def _run_train(args: argparse.Namespace) -> int:
           f"yaw {result.val.get('yaw_mae_deg', math.nan):.1f} deg")
     for kind, p in paths.items():
         print(f"  {kind}: {p} ({p.stat().st_size / 1e6:.2f} MB)")
+    if args.calibrate_sim:  # the hybrid's calibration from simulation: a site with no labelled data
+        from superbody.models.sim_calibration import calibrate_on_simulation, format_fits
+
+        models = [p for kind, p in paths.items() if kind in ("fp32", "int8")]
+        print(format_fits(calibrate_on_simulation(load_site(cfg.site), models, progress=progress)))
     return 0
 
 
@@ -100,6 +105,9 @@ def _register_train(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", default="build/models", help="output folder (default build/models)")
     p.add_argument("--name", default="model", help="file name stem (default model)")
     p.add_argument("--no-int8", action="store_true", help="skip int8 quantisation")
+    p.add_argument("--calibrate-sim", action="store_true",
+                   help="then calibrate the hybrid estimator on simulation of the site (calibrate hybrid-sim): "
+                        "the host runs the model as a hybrid, with no labelled real data")
     p.set_defaults(func=_run_train)
 
 

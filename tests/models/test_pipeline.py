@@ -181,3 +181,36 @@ def test_random_search_picks_a_configuration_and_trains_it(tmp_path):
     config = json.loads((tmp_path / "searched.train.json").read_text())["config"]
     assert set(config["hparams"]) == {"hidden", "slot_dim"}
     assert not (tmp_path / "searched.int8.onnx").exists()
+
+
+def test_a_site_with_no_labelled_data_gets_a_hybrid_calibrated_on_simulation(tiny, tmp_path):
+    """The no-ground-truth journey: train --calibrate-sim (here on the tiny model's site) writes a
+    hybrid calibration fitted on simulated people of the site, and the host then runs the model
+    as a hybrid. calibrate hybrid-sim does the same to an existing model."""
+    from superbody.edge.site import load_site
+    from superbody.host.estimation import build_estimator
+    from superbody.host.estimation.hybrid import META_HYBRID, HybridEstimator
+
+    model = tmp_path / "m.fp32.onnx"
+    shutil.copy(tiny / "tiny.fp32.onnx", model)
+    assert META_HYBRID not in {p.key for p in onnx.load(str(model)).metadata_props}
+    r = _cli("calibrate", "hybrid-sim", "--site", str(WTF_SITE), "--model", str(model), "--samples", "600",
+             "--json-out", str(tmp_path / "sim.json"))
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "hybrid calibrated on simulation of site wtf-apartment: 600 samples" in r.stdout
+    doc = json.loads((tmp_path / "sim.json").read_text())[str(model)]
+    for name in ("hybrid (held-out regions)", "network", "analytic"):
+        assert doc["reports"][name]["samples"] == 600 and doc["reports"][name]["failed"] == 0
+    meta = {p.key: p.value for p in onnx.load(str(model)).metadata_props}
+    assert json.loads(meta[META_HYBRID])["source"].startswith("simulation of site wtf-apartment")
+    est, name = build_estimator(load_site(WTF_SITE), "auto", model)
+    assert isinstance(est, HybridEstimator) and name == "hybrid:m.fp32.onnx"
+    # the same straight from training
+    r = _cli("train", "--site", str(WTF_SITE), "--arch", "gat", "--sim-samples", "400", "--epochs", "1", "--hparams",
+             '{"hidden": 16, "heads": 2, "layers": 2}', "--out", str(tmp_path), "--name", "fresh", "--no-progress", "--calibrate-sim")
+    assert r.returncode == 0, r.stderr[-2000:]
+    for kind in ("fp32", "int8"):
+        meta = {p.key: p.value for p in onnx.load(str(tmp_path / f"fresh.{kind}.onnx")).metadata_props}
+        assert META_HYBRID in meta, kind
+    r = _cli("calibrate", "hybrid-sim", "--site", str(WTF_SITE), "--model", str(model), "--samples", "10")
+    assert r.returncode == 2 and "--samples" in r.stderr and "[500, 100000]" in r.stderr
