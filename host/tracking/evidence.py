@@ -7,7 +7,8 @@ keep landing inside a candidate's gate. Two physical facts tell them from people
 - **A person is seen by every camera that clearly sees where they stand** (negative evidence).
   Each frame of a camera that clearly sees a candidate's position (``clearly_sees``: the torso
   centre, 1.15 m up, inside the image less ``EDGE_MARGIN`` of its size on each side, in front
-  of the camera and within the detector's range) is a chance to see it; a candidate is
+  of the camera, within the detector's range, no obstacle of the site in between) is a chance
+  to see it; a candidate is
   confirmed only if at least ``TrackerConfig.confirm_min_support`` of its chances since its
   steady matches began were matches. A person in full view of three cameras is matched in most
   of their frames; the coat, reported by one of the three cameras that see its spot, in at most
@@ -31,6 +32,7 @@ from numpy.typing import NDArray
 
 from superbody.edge.camera import Camera, project
 from superbody.edge.floor import detectable_range_m
+from superbody.edge.site import Obstacle
 from superbody.host.tracking.motion import _NS_PER_S
 from superbody.host.tracking.track import Track
 
@@ -41,20 +43,36 @@ EDGE_MARGIN = 0.1  # fraction of the image's width and height left out on each s
 MERGE_AFTER_S = 0.5  # how long two confirmed tracks may stand inside each other before they are one
 
 
-def clearly_sees(cam: Camera, xy: NDArray) -> NDArray[np.bool_]:
+def clearly_sees(cam: Camera, xy: NDArray, obstacles: Sequence[Obstacle] = ()) -> NDArray[np.bool_]:
     """(N,) whether the camera clearly sees a person standing at each floor point (N, 2).
 
     Clearly: their torso centre projects inside the image less ``EDGE_MARGIN`` on each side,
-    in front of the camera, within ``edge.floor.detectable_range_m``. Occlusion is not modelled.
+    in front of the camera, within ``edge.floor.detectable_range_m``, and no obstacle of the
+    site (a shelf, a pillar) stands between the camera and it. Other people are not modelled.
     """
     xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
     if not len(xy):
         return np.zeros(0, dtype=bool)
-    uv, z = project(np.column_stack([xy, np.full(len(xy), TORSO_CENTRE_M)]), cam)
+    centre = np.column_stack([xy, np.full(len(xy), TORSO_CENTRE_M)])
+    uv, z = project(centre, cam)
     mu, mv = EDGE_MARGIN * cam.width, EDGE_MARGIN * cam.height
     inside = (uv[:, 0] >= mu) & (uv[:, 0] <= cam.width - mu) & (uv[:, 1] >= mv) & (uv[:, 1] <= cam.height - mv)
     near = np.hypot(xy[:, 0] - cam.t[0], xy[:, 1] - cam.t[1]) <= detectable_range_m(cam)
-    return np.asarray((z > 0.1) & inside & near, dtype=bool)
+    return np.asarray((z > 0.1) & inside & near & ~_blocked(cam.t, centre, obstacles), dtype=bool)
+
+
+def _blocked(origin: NDArray, points: NDArray, obstacles: Sequence[Obstacle]) -> NDArray[np.bool_]:
+    """(N,) whether the segment from ``origin`` to each point (N, 3) passes through an obstacle box (slab test)."""
+    d = points - origin  # (N, 3)
+    hidden = np.zeros(len(points), dtype=bool)
+    for o in obstacles:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t1 = (np.asarray(o.min) - origin) / d
+            t2 = (np.asarray(o.max) - origin) / d
+        tmin = np.nanmax(np.minimum(t1, t2), axis=1)
+        tmax = np.nanmin(np.maximum(t1, t2), axis=1)
+        hidden |= (tmax >= np.maximum(tmin, 0.0)) & (tmin < 1.0)
+    return hidden
 
 
 def too_close(xy: NDArray, others: Sequence[NDArray] | NDArray, min_separation_m: float) -> NDArray[np.bool_]:

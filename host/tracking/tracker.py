@@ -293,7 +293,7 @@ class Tracker:
         idx = [j for j, tr in enumerate(tracks) if tr.state == "candidate" and tr._kf_t is not None]
         if not idx:
             return
-        seen = clearly_sees(self._cameras[camera], np.array([tracks[j]._kf_x[0] for j in idx]))
+        seen = clearly_sees(self._cameras[camera], np.array([tracks[j]._kf_x[0] for j in idx]), self.site.obstacles)
         matched = set(cols.tolist())
         for j, s in zip(idx, seen, strict=True):
             hit = j in matched

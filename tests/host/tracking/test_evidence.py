@@ -27,6 +27,17 @@ def test_a_camera_clearly_sees_its_middle_not_its_edges_nor_behind_it():
     assert 0 < EDGE_MARGIN < 0.5
 
 
+def test_an_obstacle_between_camera_and_person_hides_them():
+    from superbody.edge.site import Obstacle
+
+    shelf = Obstacle("shelf", (2.0, 2.0, 0.0), (2.6, 2.6, 2.0))  # on the line from c1 (4.5, 4.5) to the origin
+    pts = np.array([[0.0, 0.0], [1.0, -1.0]])
+    assert clearly_sees(C1, pts).tolist() == [True, True]
+    assert clearly_sees(C1, pts, (shelf,)).tolist() == [False, True]
+    low = Obstacle("table", (2.0, 2.0, 0.0), (2.6, 2.6, 0.5))  # below the line of sight to the torso
+    assert clearly_sees(C1, pts, (low,)).tolist() == [True, True]
+
+
 def test_too_close():
     others = np.array([[0.0, 0.0], [2.0, 0.0]])
     got = too_close(np.array([[0.1, 0.1], [0.5, 0.0], [1.8, 0.1]]), others, 0.3)
