@@ -19,14 +19,12 @@ SITE = str(WTF_SITE)
 
 
 # The model card's simulated figures for the shipped model as the host runs it (fp32 hybrid; the
-# same demo, no camera killed) when these bounds were set: position MAE 41 mm, yaw MAE 12.0 deg.
-# Bounds here: 1.5 times those (camera 3 dies half way; measured with it killed: 40-45 mm, 10.0 deg).
-# Kept, not re-derived from each card: the card's figure is one run, and runs vary by about 2 deg
-# (regenerated cards since: 40-41 mm, 10.2-10.4 deg; under heavy load up to 48 mm, 14.0 deg).
-# Since the hybrid subtracts the network's three-camera y bias measured on real data (+0.1 m,
-# models.hybrid_fit.NET_DEBIAS), which simulated people do not have, the card's demo reads 52-57 mm,
-# 9.7-11.1 deg, and this test's run 46-48 mm, 9.1-10.7 deg (three runs): inside the bounds.
-CARD_POSITION_MM, CARD_YAW_DEG = 41.0, 12.0
+# same demo, no camera killed) when these bounds were set: position MAE 64 mm, yaw MAE 7.6 deg
+# (December 2026: one network, the floor without a range cut-off, where the simulated people also
+# walk far from every camera; before, 41 mm and 12.0 deg on the smaller floor). Bounds here: 1.5
+# times those (camera 3 dies half way). Kept, not re-derived from each card: the card's figure
+# is one run, and runs vary.
+CARD_POSITION_MM, CARD_YAW_DEG = 64.0, 7.6
 
 
 @pytest.mark.slow
