@@ -17,8 +17,9 @@ keep landing inside a candidate's gate. Two physical facts tell them from people
 - **Two people cannot stand inside each other.** A candidate whose position lies within
   ``TrackerConfig.min_separation_m`` of a confirmed person's is that person seen again (a
   detector's second, partial skeleton of them, another camera's odd colours), not a newcomer:
-  it is not confirmed. Two confirmed tracks that stay that close for ``MERGE_AFTER_S`` are one
-  person: the younger is removed (``Tracker.prune``). Torsos are about 0.25 m deep and 0.4 m
+  it is not confirmed. Two confirmed tracks that stay that close for ``MERGE_AFTER_S``, and that
+  no camera saw in one frame (``seen_together``: two detections in one frame are two bodies), are
+  one person whose views went to two tracks: the younger is removed (``Tracker.prune``). Torsos are about 0.25 m deep and 0.4 m
   wide, so centres closer than 0.3 m are one body; people standing shoulder to shoulder, or
   hugging, stay further apart than that.
 """
@@ -36,7 +37,7 @@ from superbody.edge.site import Obstacle
 from superbody.host.tracking.motion import _NS_PER_S
 from superbody.host.tracking.track import Track
 
-__all__ = ["EDGE_MARGIN", "MERGE_AFTER_S", "TORSO_CENTRE_M", "clearly_sees", "too_close", "coincident"]
+__all__ = ["EDGE_MARGIN", "MERGE_AFTER_S", "TORSO_CENTRE_M", "clearly_sees", "too_close", "coincident", "seen_together"]
 
 TORSO_CENTRE_M = 1.15  # height of a standing adult's torso centre (between hips 0.9 m and shoulders 1.4 m)
 EDGE_MARGIN = 0.1  # fraction of the image's width and height left out on each side
@@ -92,17 +93,25 @@ def coincident(people: Sequence[Track], now_ns: int, min_separation_m: float) ->
     and is to be removed, so it is no longer anyone's elder.
     """
     placed = sorted((tr for tr in people if tr._kf_t is not None), key=lambda tr: (tr.confirmed_ns or 0, tr.id))
-    kept: list[NDArray] = []
+    kept: list[Track] = []
     out: list[Track] = []
     for tr in placed:
         xy = tr._kf_x[0]
-        if not too_close(xy, kept, min_separation_m)[0]:
+        elders = [o for o in kept if not seen_together(o, tr)]
+        if not too_close(xy, [o._kf_x[0] for o in elders], min_separation_m)[0]:
             tr._close_since_ns = None
-            kept.append(xy)
+            kept.append(tr)
             continue
         tr._close_since_ns = now_ns if tr._close_since_ns is None else tr._close_since_ns
         if now_ns - tr._close_since_ns >= MERGE_AFTER_S * _NS_PER_S:
             out.append(tr)
         else:
-            kept.append(xy)
+            kept.append(tr)
     return out
+
+
+def seen_together(a: Track, b: Track) -> bool:
+    """Whether some camera's latest frame matched a view to each of the two tracks: two
+    detections in one frame are two people (or one person split by a detector, which the
+    candidate rule catches), never one person whose views went to two tracks."""
+    return any(b.views.get(cam) is not None and b.views[cam].stamp_ns == sv.stamp_ns for cam, sv in a.views.items())

@@ -45,6 +45,17 @@ def test_too_close():
     assert too_close(np.array([[0.0, 0.0]]), np.zeros((0, 2)), 0.3).tolist() == [False]
 
 
+def test_two_tracks_one_camera_frame_matched_both_are_two_people_however_close():
+    from superbody.host.tracking.track import StampedView
+
+    old, young = _placed(1, (0.0, 0.0), 1 * S), _placed(2, (0.2, 0.0), 2 * S)
+    view = object()  # the views themselves do not matter here, only which frame they came from
+    old.views["c1"], young.views["c1"] = StampedView(5 * S, view), StampedView(5 * S, view)  # type: ignore[arg-type]
+    assert coincident([old, young], 10 * S, 0.3) == [] and coincident([old, young], 11 * S, 0.3) == []
+    young.views["c1"] = StampedView(5 * S + 66_000_000, view)  # another frame: nothing says two bodies
+    assert coincident([old, young], 12 * S, 0.3) == [] and coincident([old, young], 13 * S, 0.3) == [young]
+
+
 def _placed(tid: int, xy: tuple[float, float], confirmed_ns: int) -> Track:
     tr = Track(tid, str(tid), "confirmed", 0, confirmed_ns, 4, confirmed_ns=confirmed_ns)
     tr._kf_t, tr._kf_x = confirmed_ns, np.array([xy, [0.0, 0.0]])
