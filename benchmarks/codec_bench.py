@@ -52,15 +52,19 @@ PEOPLE = 10
 
 
 def observation_10() -> bytes:
-    """A simulated camera frame of the shipped site with 10 people in view (deterministic)."""
+    """A simulated camera frame of the shipped site with 10 people in view (deterministic): the
+    world's people stood on a staggered grid 2.5-4.5 m in front of camera 2, facing it."""
+    from superbody.edge.sim import NoiseModel, PersonState, skeleton
+
     site = load_site(site_path())
-    for seed in range(20):
-        world = World(site, 12, seed=seed)
-        for cam in site.camera_ids:
-            obs = SimCamera(world, cam).observe(T0)[0]
-            if len(obs.people) >= PEOPLE:
-                return wire.encode(type(obs)(obs.site, obs.camera, obs.seq, obs.stamp_ns, obs.width, obs.height, obs.people[:PEOPLE]))
-    raise RuntimeError("no simulated frame with 10 people in view")
+    world = World(site, PEOPLE + 2, seed=0)
+    spots = [(x, y) for k, x in enumerate((0.4, 1.2, 2.0)) for y in np.arange(-1.2 + 0.35 * (k % 2), 1.3, 0.7)][: PEOPLE + 2]
+    placed = [PersonState(x, y, np.pi, skeleton(x, y, np.pi, 0.0, 0.0)) for x, y in spots]
+    world.states = lambda t_s: placed  # type: ignore[method-assign]
+    obs = SimCamera(world, "2", noise=NoiseModel(view_miss_prob=0.0, spurious_prob=0.0)).observe(T0)[0]
+    if len(obs.people) < PEOPLE:
+        raise RuntimeError(f"only {len(obs.people)} of {len(placed)} people in camera 2's frame (want {PEOPLE})")
+    return wire.encode(type(obs)(obs.site, obs.camera, obs.seq, obs.stamp_ns, obs.width, obs.height, obs.people[:PEOPLE]))
 
 
 def pose_array_10() -> pose_msg.PoseArray:
