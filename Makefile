@@ -79,7 +79,7 @@ bench: $(VENV)/.dev-installed
 	$(PY) -m benchmarks.model_bench
 	$(PY) -m benchmarks.host_bench --zenoh
 
-# Retrain the shipped models and rewrite models/MODEL_CARD.md (about 1 h on 2 cores, 62 min in December 2026; needs dev.json).
+# Retrain the shipped models and rewrite models/MODEL_CARD.md (about 50 min on 2 cores; needs dev.json).
 models: $(VENV)/.dev-installed
 	scripts/train_models.sh
 

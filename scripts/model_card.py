@@ -239,7 +239,7 @@ def main(out_dir: Path, card: Path) -> int:
     if degraded:
         from superbody.models.evaluation.degraded import format_report
 
-        L += format_report(degraded).splitlines()
+        L += ["", *format_report(degraded).splitlines()]
     else:
         L += ["(not run)"]
     L += ["", "### The simulator against dev.json per view-quality bucket", "",
@@ -308,7 +308,7 @@ def main(out_dir: Path, card: Path) -> int:
             for b, gps in rates.items():
                 ratio = ratios.get(kind, {}).get(b, 1.0 if kind == "fast_gat" else None)
                 L.append(f"| {kind} | {b} | {1e3 * int(b) / gps:.3f} | {gps:.0f} | {'-' if ratio is None else f'{ratio:.2f}'} |")
-    L += ["", "## Reproduce", "", "```sh", "make models   # about 45 min on 2 cores; needs ../shared/datasets/wheresthefellow/dev.json", "```", "",
+    L += ["", "## Reproduce", "", "```sh", "make models   # about 50 min on 2 cores; needs ../shared/datasets/wheresthefellow/dev.json", "```", "",
           "Limits: one real recording (27 s, one person, 225 samples) is all the real data; its path covers about a third of the floor, "
           "so the spatial folds are small regions of that third; every hybrid parameter is fitted on those 225 samples (per fold, on the others). "
           "The 0.21 m truth offset is a mean; the tracker also leads the skeletons by 0.2-0.3 s when walking (docs/dataset.md), "
