@@ -10,13 +10,11 @@ from __future__ import annotations
 import argparse
 import logging
 import re
-import signal
 import sys
-import threading
 from importlib.metadata import entry_points
 
 from superbody.edge import transport
-from superbody.edge.cli_args import add_clock_args, add_session_args, clock_from_args, config_from_args, int_in, positive
+from superbody.edge.cli_args import add_clock_args, add_session_args, clock_from_args, config_from_args, int_in, positive, stop_on_signals
 from superbody.edge.detectors import DETECTOR_FORMS, DetectorSpec, parse_detector
 from superbody.edge.detectors.base import DetectorError
 from superbody.edge.node import DEFAULT_OAK_MODEL, SOURCE_FORMS, SourceSpec, open_source, parse_source, run_node
@@ -155,9 +153,7 @@ def _run_node(args: argparse.Namespace) -> int:
         except DetectorError as e:
             source.close()
             return error(f"--detector {args.detector}: {e}")
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    stop = stop_on_signals()
     try:
         run_node(conf, site, args.camera, source, clock, args.duration, stop, detector=detector)
     except (SourceError, DetectorError) as e:
@@ -195,9 +191,7 @@ def _register_node(sub: argparse._SubParsersAction) -> None:
 
 
 def _run_router(args: argparse.Namespace) -> int:
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    stop = stop_on_signals()
     try:
         run_router(args.listen or ([] if args.config else [transport.DEFAULT_ENDPOINT]), stop, args.config, args.cfg)
     except transport.ConfigError as e:

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 import math
+import signal
 import sys
+import threading
 from typing import TYPE_CHECKING
 
 from superbody.edge.clock import WorldClock
@@ -13,7 +15,7 @@ from superbody.edge.transport import DEFAULT_ENDPOINT, session_config
 if TYPE_CHECKING:
     import zenoh
 
-__all__ = ["positive", "int_in", "add_clock_args", "clock_from_args", "add_session_args", "config_from_args", "fail"]
+__all__ = ["positive", "int_in", "add_clock_args", "clock_from_args", "add_session_args", "config_from_args", "fail", "stop_on_signals"]
 
 
 def positive(text: str) -> float:
@@ -69,3 +71,11 @@ def fail(command: str, message: str) -> int:
     """Print ``superbody COMMAND: error: MESSAGE`` on stderr; the exit code of a bad argument, 2."""
     print(f"superbody {command}: error: {message}", file=sys.stderr)
     return 2
+
+
+def stop_on_signals() -> threading.Event:
+    """An event that SIGTERM (systemd, docker stop) and SIGINT (Ctrl-C) set: a process's clean stop."""
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    return stop

@@ -44,7 +44,7 @@ import numpy as np
 
 from superbody.edge.camera import Camera, look_at_rotation
 
-__all__ = ["Site", "Obstacle", "SiteError", "load_site", "parse_site", "dump_site", "NAME_RE"]
+__all__ = ["Site", "Obstacle", "SiteError", "load_site", "parse_site", "dump_site", "NAME_RE", "obstacles_hide"]
 
 # Site and camera ids become Zenoh key chunks: keep them to a safe alphabet.
 NAME_RE = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
@@ -62,6 +62,22 @@ class Obstacle:
     name: str
     min: tuple[float, float, float]
     max: tuple[float, float, float]
+
+
+def obstacles_hide(origin: Any, points: Any, obstacles: Any, before: float = 1.0) -> np.ndarray:
+    """(N,) whether the segment from ``origin`` (3,) to each point (N, 3) passes through one of the
+    obstacle boxes before the fraction ``before`` of its length (slab test on origin + s d)."""
+    origin = np.asarray(origin, dtype=np.float64)
+    d = np.asarray(points, dtype=np.float64).reshape(-1, 3) - origin  # (N, 3)
+    hidden = np.zeros(len(d), dtype=bool)
+    for o in obstacles:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t1 = (np.asarray(o.min) - origin) / d
+            t2 = (np.asarray(o.max) - origin) / d
+        tmin = np.nanmax(np.minimum(t1, t2), axis=1)
+        tmax = np.nanmin(np.maximum(t1, t2), axis=1)
+        hidden |= (tmax >= np.maximum(tmin, 0.0)) & (tmin < before)
+    return hidden
 
 
 @dataclass(frozen=True)

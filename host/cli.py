@@ -9,13 +9,11 @@ import argparse
 import json
 import logging
 import os
-import signal
 import sys
-import threading
 from dataclasses import replace
 from pathlib import Path
 
-from superbody.edge.cli_args import add_clock_args, add_session_args, clock_from_args, config_from_args, int_in, positive
+from superbody.edge.cli_args import add_clock_args, add_session_args, clock_from_args, config_from_args, int_in, positive, stop_on_signals
 from superbody.edge.resources import site_path
 from superbody.edge.site import NAME_RE, SiteError, load_site
 from superbody.host.demo import DEFAULT_SITE, DEMO_PORT, DemoConfig, run_demo
@@ -62,9 +60,7 @@ def _run_host(args: argparse.Namespace) -> int:
         print(f"superbody host run: error: {e}", file=sys.stderr)
         return 2
     pin_mmap_threshold()  # a burst of large messages must not raise the host's memory for good
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    stop = stop_on_signals()
     ros2 = _open_ros2(args)
     if ros2 is False:
         return 2
@@ -136,9 +132,7 @@ def _run_record(args: argparse.Namespace) -> int:
     except (ValueError, OSError) as e:
         print(f"superbody record: error: {e}", file=sys.stderr)
         return 2
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    stop = stop_on_signals()
     counts = record(conf, out, args.duration, args.site, stop)
     print(f"superbody record: wrote {out}: " + (", ".join(f"{k} {v}" for k, v in sorted(counts.items())) or "no messages"))
     return 0
@@ -178,9 +172,7 @@ def _run_view(args: argparse.Namespace) -> int:
     except (SiteError, ValueError) as e:
         print(f"superbody view: error: {e}", file=sys.stderr)
         return 2
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    stop = stop_on_signals()
     try:
         counts = run_view(conf, site, args.ws_host, args.ws_port, stop)
     except RuntimeError as e:  # e.g. the port is taken
@@ -260,9 +252,7 @@ def _run_demo(args: argparse.Namespace) -> int:
     except (SiteError, KeyError) as e:
         print(f"superbody demo: error: {e.args[0] if e.args else e}", file=sys.stderr)
         return 2
-    stop = threading.Event()
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    stop = stop_on_signals()
     try:
         summary = run_demo(cfg, stop)
     except RuntimeError as e:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import tomllib
 from pathlib import Path
 
@@ -171,12 +172,6 @@ def _run_calibrate_from_dataset(args: argparse.Namespace) -> int:
     return 0
 
 
-def _tty() -> bool:
-    import sys
-
-    return sys.stderr.isatty()
-
-
 def _samples(text: str) -> int:
     v = int(text)
     if not 500 <= v <= 100_000:
@@ -195,7 +190,7 @@ def _run_calibrate_hybrid_sim(args: argparse.Namespace) -> int:
         for m in args.model:
             if not m.is_file():
                 raise ValueError(f"--model {m}: no such file")
-        fits = calibrate_on_simulation(site, args.model, args.samples, args.seed, progress=_tty())
+        fits = calibrate_on_simulation(site, args.model, args.samples, args.seed, progress=sys.stderr.isatty())
     except (SiteError, ValueError, ModelMismatchError) as e:
         return _fail(command, str(e))
     print(format_fits(fits))

@@ -24,7 +24,7 @@ from superbody.edge.sim.appearance import Appearance, Lighting, _person_histogra
 from superbody.edge.sim.noise import NoiseModel, facing_factor
 from superbody.edge.sim.skeleton import _LEFT, _RIGHT
 from superbody.edge.sim.world import _PERSON_RADIUS_M, PersonState, World
-from superbody.edge.site import Site
+from superbody.edge.site import Site, obstacles_hide
 
 __all__ = ["render_views", "SimCamera"]
 
@@ -163,14 +163,7 @@ def _occluded(origin: NDArray, joints: NDArray, k: int, centres: NDArray, height
         zs = origin[2] + s * d[:, 2]
         hidden |= (np.linalg.norm(closest, axis=1) < _PERSON_RADIUS_M) & (s < 0.9) & (zs < heights[q])
     if site is not None:
-        for o in site.obstacles:
-            # Slab test on the segment origin + s d, s in [0, 1).
-            with np.errstate(divide="ignore", invalid="ignore"):
-                t1 = (np.asarray(o.min) - origin) / d
-                t2 = (np.asarray(o.max) - origin) / d
-            tmin = np.nanmax(np.minimum(t1, t2), axis=1)
-            tmax = np.nanmin(np.maximum(t1, t2), axis=1)
-            hidden |= (tmax >= np.maximum(tmin, 0.0)) & (tmin < 0.98)
+        hidden |= obstacles_hide(origin, joints, site.obstacles, before=0.98)
     return hidden
 
 

@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 
 from superbody.edge.camera import Camera, project
 from superbody.edge.floor import detectable_range_m
-from superbody.edge.site import Obstacle
+from superbody.edge.site import Obstacle, obstacles_hide
 from superbody.host.tracking.motion import _NS_PER_S
 from superbody.host.tracking.track import Track
 
@@ -59,21 +59,7 @@ def clearly_sees(cam: Camera, xy: NDArray, obstacles: Sequence[Obstacle] = ()) -
     mu, mv = EDGE_MARGIN * cam.width, EDGE_MARGIN * cam.height
     inside = (uv[:, 0] >= mu) & (uv[:, 0] <= cam.width - mu) & (uv[:, 1] >= mv) & (uv[:, 1] <= cam.height - mv)
     near = np.hypot(xy[:, 0] - cam.t[0], xy[:, 1] - cam.t[1]) <= detectable_range_m(cam)
-    return np.asarray((z > 0.1) & inside & near & ~_blocked(cam.t, centre, obstacles), dtype=bool)
-
-
-def _blocked(origin: NDArray, points: NDArray, obstacles: Sequence[Obstacle]) -> NDArray[np.bool_]:
-    """(N,) whether the segment from ``origin`` to each point (N, 3) passes through an obstacle box (slab test)."""
-    d = points - origin  # (N, 3)
-    hidden = np.zeros(len(points), dtype=bool)
-    for o in obstacles:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t1 = (np.asarray(o.min) - origin) / d
-            t2 = (np.asarray(o.max) - origin) / d
-        tmin = np.nanmax(np.minimum(t1, t2), axis=1)
-        tmax = np.nanmin(np.maximum(t1, t2), axis=1)
-        hidden |= (tmax >= np.maximum(tmin, 0.0)) & (tmin < 1.0)
-    return hidden
+    return np.asarray((z > 0.1) & inside & near & ~obstacles_hide(cam.t, centre, obstacles), dtype=bool)
 
 
 def too_close(xy: NDArray, others: Sequence[NDArray] | NDArray, min_separation_m: float) -> NDArray[np.bool_]:
@@ -93,20 +79,17 @@ def coincident(people: Sequence[Track], now_ns: int, min_separation_m: float) ->
     and is to be removed, so it is no longer anyone's elder.
     """
     placed = sorted((tr for tr in people if tr._kf_t is not None), key=lambda tr: (tr.confirmed_ns or 0, tr.id))
-    kept: list[Track] = []
+    xy = np.array([tr._kf_x[0] for tr in placed]).reshape(-1, 2)
+    close = np.linalg.norm(xy[:, None] - xy[None], axis=2) < min_separation_m  # (M, M)
     out: list[Track] = []
-    for tr in placed:
-        xy = tr._kf_x[0]
-        elders = [o for o in kept if not seen_together(o, tr)]
-        if not too_close(xy, [o._kf_x[0] for o in elders], min_separation_m)[0]:
+    for j, tr in enumerate(placed):
+        elders = [placed[i] for i in np.flatnonzero(close[j, :j])]  # older and close: only these pairs are checked
+        if not any(o not in out and not seen_together(o, tr) for o in elders):
             tr._close_since_ns = None
-            kept.append(tr)
             continue
         tr._close_since_ns = now_ns if tr._close_since_ns is None else tr._close_since_ns
         if now_ns - tr._close_since_ns >= MERGE_AFTER_S * _NS_PER_S:
             out.append(tr)
-        else:
-            kept.append(tr)
     return out
 
 

@@ -185,10 +185,10 @@ class Tracker:
             return []
         tracks = [tr for tr in self._tracks.values() if t - tr.last_seen_ns < self._remove_ns]
         views = self._measure(obs) if obs.people else None
-        if views is None or not len(views.idx):  # a frame that sees nobody is evidence too
-            self._count_chances(obs.camera, tracks, np.empty(0, np.intp))
         matches: list[Match | None] = [None] * len(obs.people)  # the views left None at the end were ignored
-        if views is not None and len(views.idx):
+        if views is None or not len(views.idx):
+            self._count_chances(obs.camera, tracks, np.empty(0, np.intp))  # a frame that sees nobody is evidence too
+        else:
             rows, cols, colour_d, geo_d, near = self._associate(t, tracks, views.amps, views.has_colour, views.ground,
                                                                 views.sigma, views.has_ground)
             self._count_chances(obs.camera, tracks, cols)

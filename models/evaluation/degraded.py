@@ -54,15 +54,11 @@ _FACE, _ARMS = (0, 1, 2, 3, 4), (7, 8, 9, 10)
 _SHOULDERS, _HIPS = (5, 6), (11, 12)
 
 
-def _joints(v: PersonView) -> int:
-    return int((~np.isnan(v.keypoints[:, 0])).sum())
-
-
 def _cut(v: PersonView, gone: NDArray[np.bool_]) -> PersonView | None:
     """The view without the joints ``gone`` (17,), its box fitted to what is left; None if nothing is."""
     kp = v.keypoints.copy()
     kp[gone] = np.nan
-    seen = ~np.isnan(kp[:, 0])
+    seen = ~np.isnan(kp[:, 0])  # what is left
     if not seen.any():
         return None
     lo, hi = kp[seen, :2].min(0), kp[seen, :2].max(0)
@@ -88,7 +84,7 @@ def degrade(sample: Sample, kind: str, rng: np.random.Generator) -> Sample | Non
     cam = cams[int(rng.integers(len(cams)))]
     v = views[cam]
     kp = v.keypoints
-    seen = ~np.isnan(kp[:, 0])
+    seen = v.visible
     if kind == "top_edge":
         top, bottom = _row(v, _SHOULDERS), _row(v, _HIPS)
         if not math.isfinite(top):
@@ -152,7 +148,7 @@ def bucket_masks(samples: Sequence[Sample], torso: NDArray, site: Site) -> dict[
             dists.append(math.hypot(c[0] - x, c[1] - y))
             rels.append(abs(math.degrees(float(wrap_angle(yaw - math.atan2(c[1] - y, c[0] - x))))))
         far[i] = one[i] and dists[0] > FAR_M
-        few[i] = max(_joints(v) for v in s.views.values()) <= FEW_JOINTS
+        few[i] = max(int(v.visible.sum()) for v in s.views.values()) <= FEW_JOINTS
         side[i] = all(SIDE_ON_DEG[0] <= r <= SIDE_ON_DEG[1] for r in rels)
     return {"all": np.ones(n, bool), "one view": one, "one far view": far, "<= 8 joints": few, "all views side-on": side}
 
