@@ -1,25 +1,38 @@
 """Where a person stands on the floor, from one camera's 2D view.
 
 A joint of known height above the floor (edge.body.TYPICAL_HEIGHT_M) and a calibrated camera
-give a point: the pixel's ray meets the horizontal plane at that height. The lowest visible
-body part is used, because the lower the joint, the further it is (vertically) from a
-wall-mounted camera and the less an error in its assumed height moves the point:
+give a point: the pixel's ray meets the horizontal plane at that height. Each body part gives
+one candidate (a level):
 
-    ankles (mean of the visible ones) at 0.12 m -> hips at 0.91 m -> shoulders at 1.43 m
-    -> the bottom-centre of the bounding box at 0 m
+    ankles (mean of the visible ones) at 0.12 m, hips at 0.91 m, shoulders at 1.43 m,
+    the bottom-centre of the bounding box at 0 m,
+    and the torso: the range at which the shoulders sit 0.52 m above the hips
+
+and the candidate with the smallest uncertainty is used. From a wall-mounted camera that is
+the lowest visible joint: the lower the joint, the further it is (vertically) from the camera
+and the less an error in its assumed height moves the point. From a camera mounted at about
+hip height (1 m) the hips' rays graze their plane and a 5 cm error in a person's hip height
+moves the point by metres; there the ankles, the torso's length or the shoulders decide.
 
 A level whose ray misses its plane in front of the camera, or meets it farther than
-``max_range_m`` away, falls through to the next one. A box is used only if it spans a person's
-height at that range (a detector's box around a head alone would put the "feet" metres away).
+``max_range_m`` away, gives no candidate. A box is used only if it spans a person's height at
+that range (a detector's box around a head alone would put the "feet" metres away).
 
-The uncertainty is a 1-sigma distance in metres, mostly along the viewing direction:
+The uncertainty is a 1-sigma distance in metres, mostly along the viewing direction. For a
+joint's plane:
 
     sigma^2 = body^2 + (r * dz / dh)^2 + (dtheta * (r^2 + dh^2) / dh)^2
 
 with r the horizontal range, dh the camera's height above the plane, dz the spread of the
 joint's real height (people differ, knees bend), dtheta the pixel noise as an angle, and body
-how far that part sits from the point between the feet. It grows with range and with each
-fallback (higher joints sit closer to the camera's height).
+how far that part sits from the point between the feet. It grows with range and as the joint
+comes nearer the camera's height. The torso's range is r = L / (tan e_s - tan e_h), with e_s
+and e_h the elevations of the shoulders' and hips' rays and L the torso's vertical length; it
+needs no camera height, and
+
+    sigma^2 = body^2 + (r * dL / L)^2 + (dtheta * r^2 / L)^2 * ((1 + tan^2 e_s)^2 + (1 + tan^2 e_h)^2)
+
+with dL the spread of L between people and postures.
 """
 
 from __future__ import annotations
@@ -44,15 +57,17 @@ class Level(NamedTuple):
 
     name: str
     joints: tuple[int, ...]  # COCO-17 indices averaged in the image; () for the bbox
-    height_m: float  # height of that part above the floor
+    height_m: float  # height of that part above the floor (the torso: shoulders' height above the hips)
     height_std_m: float  # how much that height varies between people and poses
     body_std_m: float  # how far that part sits, horizontally, from the point between the feet
     pixel_std: float  # detector noise on that pixel
 
 
 _LEFT_ANKLE, _RIGHT_ANKLE = INDEX["left_ankle"], INDEX["right_ankle"]
+_TORSO_M: Final[float] = TYPICAL_HEIGHT_M[LEFT_SHOULDER] - TYPICAL_HEIGHT_M[LEFT_HIP]
 
-# Tried in this order; the index into LEVELS is what ground_points reports as "level".
+# The index into LEVELS is what ground_points reports as "level". The last is the torso's
+# length; the others are planes at a height.
 LEVELS: Final[tuple[Level, ...]] = (
     Level("ankles", (_LEFT_ANKLE, _RIGHT_ANKLE), TYPICAL_HEIGHT_M[_LEFT_ANKLE], 0.05, 0.10, 4.0),
     Level("hips", (LEFT_HIP, RIGHT_HIP), TYPICAL_HEIGHT_M[LEFT_HIP], 0.08, 0.10, 4.0),
@@ -60,7 +75,11 @@ LEVELS: Final[tuple[Level, ...]] = (
     # Used only when no ankle, hip or shoulder was seen, so the box's bottom edge is as likely
     # an occluder's edge (a table, a sofa) as the feet: a loose error model.
     Level("bbox", (), 0.0, 0.35, 0.50, 8.0),
+    # Shoulder-to-hip length: ~8% between adults (stature alone varies ~4%) and with posture.
+    Level("torso", (LEFT_SHOULDER, RIGHT_SHOULDER, LEFT_HIP, RIGHT_HIP), _TORSO_M, 0.04, 0.10, 4.0),
 )
+_PLANES: Final[int] = 4  # LEVELS[:_PLANES] meet a plane; the torso is LEVELS[_PLANES]
+_HIPS, _SHOULDERS, _TORSO = 1, 2, 4
 # Below this height difference the ray grazes the plane and the point means nothing.
 _MIN_DH_M: Final[float] = 0.05
 # A box whose bottom is this close to the image's bottom edge has its feet cut off.
@@ -70,11 +89,11 @@ _EDGE_PX: Final[float] = 2.0
 # at the hips or elbows reads ~1.1-1.3 m, and its "floor point" would be metres too far.
 _BOX_HEIGHT_M: Final[tuple[float, float]] = (1.4, 2.3)
 # The joint levels' indices as one (levels, 2) table, and each level's error model as (L,) arrays.
-_JOINTS = np.array([lv.joints for lv in LEVELS if lv.joints])  # (3, 2)
-_HEIGHT = np.array([lv.height_m for lv in LEVELS])  # (L,)
-_HEIGHT_STD = np.array([lv.height_std_m for lv in LEVELS])
-_BODY_STD = np.array([lv.body_std_m for lv in LEVELS])
-_PIXEL_STD = np.array([lv.pixel_std for lv in LEVELS])
+_JOINTS = np.array([lv.joints for lv in LEVELS[: _PLANES - 1]])  # (3, 2)
+_HEIGHT = np.array([lv.height_m for lv in LEVELS[:_PLANES]])  # (P,)
+_HEIGHT_STD = np.array([lv.height_std_m for lv in LEVELS[:_PLANES]])
+_BODY_STD = np.array([lv.body_std_m for lv in LEVELS[:_PLANES]])
+_PIXEL_STD = np.array([lv.pixel_std for lv in LEVELS[:_PLANES]])
 
 
 def ground_points(
@@ -98,53 +117,72 @@ def ground_points(
     """
     kp = np.asarray(keypoints, dtype=np.float64).reshape(-1, 17, 3)  # (N, 17, 3)
     bb = np.asarray(bboxes, dtype=np.float64).reshape(-1, 4)  # (N, 4)
-    n, n_levels = len(kp), len(LEVELS)
-    dh, sigma_fixed, sigma_range, sigma_pixel = _camera_terms(cam)  # (L,) each
+    n, p = len(kp), _PLANES
+    dh, sigma_fixed, sigma_range, sigma_pixel = _camera_terms(cam)  # (P,) each
     t = cam.t  # (3,)
     with np.errstate(invalid="ignore", divide="ignore"):
-        # Candidate pixel of each level: the mean of its visible joints, or the box's bottom
-        # centre; then the box's top centre: (N, L + 1, 2), NaN where there is none.
+        # Candidate pixel of each plane level: the mean of its visible joints, or the box's
+        # bottom centre; then the box's top centre: (N, P + 1, 2), NaN where there is none.
         pts = kp[:, _JOINTS, :2]  # (N, 3, 2, 2)
         seen = ~np.isnan(pts[..., 0])  # (N, 3, 2)
-        uv = np.empty((n, n_levels + 1, 2))
-        uv[:, : n_levels - 1] = np.where(seen[..., None], pts, 0.0).sum(axis=2) / seen.sum(axis=2)[..., None]  # NaN if none
+        uv = np.empty((n, p + 1, 2))
+        uv[:, : p - 1] = np.where(seen[..., None], pts, 0.0).sum(axis=2) / seen.sum(axis=2)[..., None]  # NaN if none
         box_ok = (bb[:, 2] > bb[:, 0]) & (bb[:, 3] > bb[:, 1]) & (bb[:, 3] < cam.height - _EDGE_PX)  # False for NaN
-        uv[:, n_levels - 1 :, 0] = np.where(box_ok, 0.5 * (bb[:, 0] + bb[:, 2]), np.nan)[:, None]
-        uv[:, n_levels - 1, 1] = np.where(box_ok, bb[:, 3], np.nan)  # bottom centre
-        uv[:, n_levels, 1] = np.where(box_ok, bb[:, 1], np.nan)  # top centre
+        uv[:, p - 1 :, 0] = np.where(box_ok, 0.5 * (bb[:, 0] + bb[:, 2]), np.nan)[:, None]
+        uv[:, p - 1, 1] = np.where(box_ok, bb[:, 3], np.nan)  # bottom centre
+        uv[:, p, 1] = np.where(box_ok, bb[:, 1], np.nan)  # top centre
 
         # One batch of rays; where each level's ray meets its plane z = h.
-        flat = uv.reshape(-1, 2)  # (N (L + 1), 2)
+        flat = uv.reshape(-1, 2)  # (N (P + 1), 2)
         usable = ~np.isnan(flat).any(axis=1)
         d: NDArray[np.float64] = np.full((len(flat), 3), np.nan)
         if usable.any():
             d[usable] = pixel_to_ray(flat[usable], cam)[1]
-        d = d.reshape(n, n_levels + 1, 3)  # (N, L + 1, 3)
-        hit, valid = intersect_plane(t, d[:, :n_levels].reshape(-1, 3), np.tile(_HEIGHT, n))
-        points, valid = hit[:, :2].reshape(n, n_levels, 2), valid.reshape(n, n_levels)  # (N, L, 2), (N, L)
-        r = np.hypot(points[..., 0] - t[0], points[..., 1] - t[1])  # (N, L) horizontal range
+        d = d.reshape(n, p + 1, 3)  # (N, P + 1, 3)
+        hit, valid = intersect_plane(t, d[:, :p].reshape(-1, 3), np.tile(_HEIGHT, n))
+        points = np.empty((n, p + 1, 2))
+        points[:, :p], valid = hit[:, :2].reshape(n, p, 2), valid.reshape(n, p)  # (N, P, 2), (N, P)
+        r = np.hypot(points[:, :p, 0] - t[0], points[:, :p, 1] - t[1])  # (N, P) horizontal range
         valid &= (r <= max_range_m) & (dh >= _MIN_DH_M)
         # A box is a person's only if it spans a plausible body: the top edge's ray, at the
         # bottom point's range, must be at a person's height (a head-only box fails this).
-        top = d[:, n_levels]  # (N, 3)
+        top = d[:, p]  # (N, 3)
         top_height = t[2] + top[:, 2] * r[:, -1] / np.hypot(top[:, 0], top[:, 1])  # (N,)
         clipped = bb[:, 1] <= _EDGE_PX  # head above the image: the height is unknown
         valid[:, -1] &= clipped | ((top_height >= _BOX_HEIGHT_M[0]) & (top_height <= _BOX_HEIGHT_M[1]))
+        # sigma^2 = body^2 + (r dz / dh)^2 + (dtheta (r^2 + dh^2) / dh)^2
+        sigma = np.full((n, p + 1), np.inf)
+        sigma[:, :p] = np.sqrt(sigma_fixed + (r * sigma_range) ** 2 + (sigma_pixel * (r * r + dh**2)) ** 2)
+        points[:, p], sigma[:, p] = _torso(d[:, _HIPS], d[:, _SHOULDERS], cam, max_range_m)
+    sigma[:, :p][~valid] = np.inf
 
-    level = np.where(valid.any(axis=1), np.argmax(valid, axis=1), -1).astype(np.int8)  # (N,) first that worked
-    found = level >= 0
+    level = np.argmin(sigma, axis=1)  # (N,) the most certain candidate
     rows = np.arange(n)
-    lv = np.maximum(level, 0)
-    r_used = r[rows, lv]  # (N,)
-    # sigma^2 = body^2 + (r dz / dh)^2 + (dtheta (r^2 + dh^2) / dh)^2
-    sigma = np.sqrt(sigma_fixed[lv] + (r_used * sigma_range[lv]) ** 2 + (sigma_pixel[lv] * (r_used * r_used + dh[lv] ** 2)) ** 2)
-    xy = np.where(found[:, None], points[rows, lv], np.nan)
-    return xy, np.where(found, sigma, np.nan), level
+    best = sigma[rows, level]
+    found = np.isfinite(best)
+    xy = np.where(found[:, None], points[rows, level], np.nan)
+    return xy, np.where(found, best, np.nan), np.where(found, level, -1).astype(np.int8)
+
+
+def _torso(hips: NDArray, shoulders: NDArray, cam: Camera, max_range_m: float) -> tuple[NDArray, NDArray]:
+    """Floor points (N, 2) and sigmas (N,; inf where none) from the torso's length: the range
+    at which the shoulders' ray passes ``_TORSO_M`` above the hips' (see the module docstring)."""
+    lv = LEVELS[_TORSO]
+    flat_h, flat_s = np.hypot(hips[:, 0], hips[:, 1]), np.hypot(shoulders[:, 0], shoulders[:, 1])  # (N,)
+    tan_h, tan_s = hips[:, 2] / flat_h, shoulders[:, 2] / flat_s  # (N,) elevation tangents
+    r = lv.height_m / (tan_s - tan_h)  # (N,) NaN without both rays
+    ahead = hips[:, :2] / flat_h[:, None] + shoulders[:, :2] / flat_s[:, None]  # (N, 2) the person's direction
+    ahead /= np.linalg.norm(ahead, axis=1, keepdims=True)
+    dtheta = lv.pixel_std / (0.5 * (cam.fx + cam.fy))
+    sigma = np.sqrt(lv.body_std_m**2 + (r * lv.height_std_m / lv.height_m) ** 2
+                    + (dtheta * r * r / lv.height_m) ** 2 * ((1 + tan_s**2) ** 2 + (1 + tan_h**2) ** 2))
+    ok = (r > 0) & (r <= max_range_m)  # False for NaN
+    return cam.t[:2] + r[:, None] * ahead, np.where(ok, sigma, np.inf)
 
 
 @lru_cache(maxsize=256)
 def _camera_terms(cam: Camera) -> tuple[NDArray[np.float64], ...]:
-    """Per level (L,): the camera's height above its plane dh, and the error model's terms
+    """Per plane level (P,): the camera's height above its plane dh, and the error model's terms
     body^2, dz / dh and dtheta / dh (see the module docstring)."""
     dh = np.abs(cam.t[2] - _HEIGHT)  # (L,)
     dtheta = _PIXEL_STD / (0.5 * (cam.fx + cam.fy))  # (L,) pixel noise as an angle

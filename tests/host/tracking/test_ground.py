@@ -28,8 +28,9 @@ def camera(position=(0.0, 0.0, 2.5), target=(3.0, 0.0, 1.0), dist=(), width=640,
     )
 
 
-def skeleton(x: float, y: float, yaw: float = 0.0) -> np.ndarray:
-    """(17, 3) world joints of a person standing at (x, y), facing ``yaw``."""
+def skeleton(x: float, y: float, yaw: float = 0.0, scale: float = 1.0) -> np.ndarray:
+    """(17, 3) world joints of a person standing at (x, y), facing ``yaw``; ``scale`` times the
+    typical height."""
     # Left joints sit to the person's left, right ones to the right; the head a little forward.
     lateral = np.array([0.0, 0.03, -0.03, 0.07, -0.07, 0.2, -0.2, 0.25, -0.25, 0.25, -0.25, 0.12, -0.12, 0.1, -0.1, 0.1, -0.1])
     forward = np.zeros(NUM_KEYPOINTS)
@@ -37,13 +38,13 @@ def skeleton(x: float, y: float, yaw: float = 0.0) -> np.ndarray:
     f = np.array([math.cos(yaw), math.sin(yaw)])
     left = np.array([-f[1], f[0]])
     xy = np.array([x, y]) + lateral[:, None] * left + forward[:, None] * f
-    return np.column_stack([xy, TYPICAL_HEIGHT_M])
+    return np.column_stack([xy, scale * np.asarray(TYPICAL_HEIGHT_M)])
 
 
-def view(cam: Camera, x: float, y: float, hide: tuple[int, ...] = ()) -> PersonView:
+def view(cam: Camera, x: float, y: float, hide: tuple[int, ...] = (), scale: float = 1.0) -> PersonView:
     """The person at (x, y) seen by ``cam``; joints in ``hide`` or outside the image are missing.
     The box spans the joints and reaches the floor."""
-    uv, depth = project(skeleton(x, y), cam)
+    uv, depth = project(skeleton(x, y, scale=scale), cam)
     kp = np.column_stack([uv, np.full(NUM_KEYPOINTS, 0.9)]).astype(np.float32)
     inside = (depth > 0) & (uv >= 0).all(axis=1) & (uv[:, 0] < cam.width) & (uv[:, 1] < cam.height)
     kp[~inside] = np.nan
@@ -74,6 +75,22 @@ def test_ground_point_levels(xy, hide, level, tol):
     assert np.linalg.norm(point - xy) < sigma
     _, _, levels = ground_points(view(cam, *xy, hide=hide).keypoints[None], view(cam, *xy).bbox[None], cam)
     assert levels[0] == LEVEL[level]
+
+
+@pytest.mark.parametrize("scale", [0.88, 0.95, 1.0, 1.05, 1.1])  # people 1.54-1.93 m tall
+@pytest.mark.parametrize("x", [1.2, 1.5, 1.8])  # feet below the image's bottom edge
+def test_a_camera_at_hip_height_places_close_people_by_their_torso(x, scale):
+    # A camera 1 m up, looking level: the hips' rays graze their plane, so a person whose hips
+    # are 5 cm lower than typical landed 0.5 m too close to the camera (the hips decided, as
+    # the lowest visible joint). The torso's length does not depend on the camera's height.
+    cam = camera(position=(0.0, 0.0, 1.0), target=(3.0, 0.0, 1.0))
+    v = view(cam, x, 0.2, scale=scale)
+    assert np.isnan(v.keypoints[list(ANKLES), 0]).all()
+    point, sigma = ground_point(v, cam)
+    err = float(np.linalg.norm(point - (x, 0.2)))
+    assert err < 0.3 and err < 2.0 * sigma
+    _, _, levels = ground_points(v.keypoints[None], v.bbox[None], cam)
+    assert levels[0] == LEVEL["torso"]
 
 
 def test_ground_point_undoes_lens_distortion():
