@@ -8,6 +8,7 @@ sets ``func`` on each parser. ``func(args)`` returns the exit code.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import re
 import sys
@@ -19,8 +20,10 @@ from superbody.edge.detectors import DETECTOR_FORMS, DetectorSpec, parse_detecto
 from superbody.edge.detectors.base import DetectorError
 from superbody.edge.node import DEFAULT_OAK_MODEL, SOURCE_FORMS, SourceSpec, open_source, parse_source, run_node
 from superbody.edge.router import run_router
-from superbody.edge.site import SiteError, load_site
+from superbody.edge.site import Site, SiteError, load_site
 from superbody.edge.sources.source import SourceError
+
+log = logging.getLogger("superbody.edge")
 
 __all__ = ["main", "register", "build_parser"]
 
@@ -123,6 +126,27 @@ def _check_options(args: argparse.Namespace) -> None:
         raise ValueError(f"--clock-scale and --clock-anchor-ns are for simulated sources; --source {spec} runs on the wall clock")
 
 
+def _sized_for_site(spec: DetectorSpec, site: Site, camera_id: str) -> DetectorSpec:
+    """MoveNet without ``@SHORT``: the input size at which it finds a standing person on most of
+    the floor this camera sees (``movenet.short_side_for``); other detectors as they are."""
+    if spec.kind != "movenet" or spec.size is not None:
+        return spec
+    from superbody.edge.detectors.movenet import DEFAULT_SHORT_SIDE, PERSON_INPUT_PX, network_size, short_side_for
+
+    cam = site.camera(camera_id)
+    choice = short_side_for(cam, site.floor)
+    if choice is None:
+        log.warning("camera %s sees none of site %s's floor: MoveNet runs at its default input short side %d px", camera_id, site.name,
+                    DEFAULT_SHORT_SIDE)
+        return spec
+    w, h = network_size(cam.width, cam.height, choice.short_side)
+    log.info("camera %s: MoveNet input %d x %d: a standing person is %.0f-%.0f px tall in the image, %.0f-%.0f px in %d x %d "
+             "(found between %.0f and %.0f) on %.0f%% of the floor it sees; movenet@SHORT sets another size", camera_id, w, h,
+             *choice.person_px, *(v * choice.short_side / min(cam.width, cam.height) for v in choice.person_px), w, h,
+             *PERSON_INPUT_PX, 100 * choice.share)
+    return dataclasses.replace(spec, size=choice.short_side)
+
+
 def _run_node(args: argparse.Namespace) -> int:
     def error(message: object, code: int = 2) -> int:
         print(f"superbody edge run: error: {message}", file=sys.stderr)
@@ -149,7 +173,7 @@ def _run_node(args: argparse.Namespace) -> int:
         from superbody.edge.detectors import open_detector
 
         try:
-            detector = open_detector(args.detector)
+            detector = open_detector(_sized_for_site(args.detector, site, args.camera))
         except DetectorError as e:
             source.close()
             return error(f"--detector {args.detector}: {e}")

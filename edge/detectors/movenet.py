@@ -22,29 +22,97 @@ until its short side is ``short_side`` pixels (default 256: the largest at which
 as the image stays whole, so far people get as many pixels as that allows), then padded right
 and bottom up to multiples of 32, never stretched: 4:3 cameras run at 352 x 256, 16:9 ones at
 480 x 256. A camera whose people are all far can trade speed and close range for them with
-``movenet@SHORT`` (e.g. ``@384``: 512 x 384 for 4:3, about three times the time).
+``movenet@SHORT`` (e.g. ``@384``: 512 x 384 for 4:3, about three times the time); a node given
+plain ``movenet`` chooses that size for its camera from the site (``short_side_for``).
 """
 
 from __future__ import annotations
 
 import math
 import os
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Final
+from typing import Final, NamedTuple
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
 from superbody.edge.body import NUM_KEYPOINTS
+from superbody.edge.camera import Camera
 from superbody.edge.detectors.base import DetectorError, Letterbox, letterbox, onnx_session, select_people
 
-__all__ = ["MoveNet", "decode_movenet", "network_size", "default_model_path", "DEFAULT_SHORT_SIDE", "SHORT_SIDES", "COLUMNS"]
+__all__ = ["MoveNet", "decode_movenet", "network_size", "default_model_path", "short_side_for", "SizeChoice", "DEFAULT_SHORT_SIDE",
+           "SHORT_SIDES", "SITE_SHORT_SIDES", "COLUMNS"]
 
 COLUMNS: Final[int] = 3 * NUM_KEYPOINTS + 5  # 56: 17 x (y, x, score), ymin, xmin, ymax, xmax, score
 DEFAULT_SHORT_SIDE: Final[int] = 256
 SHORT_SIDES: Final[range] = range(96, 1024 + 1, 32)  # the input short sides ``movenet@SHORT`` takes
 MODEL_FILE: Final[str] = "movenet-multipose.onnx"
+# The band of person heights (head to feet, pixels in the network's input) MoveNet finds people
+# over, on OpenCV's sample media: walkers under about 30 px are lost (vtest.avi), and a person as
+# tall as a 256 px input is found whole, one taller found twice or in parts (messi5.jpg,
+# basketball1.png).
+PERSON_INPUT_PX: Final[tuple[float, float]] = (32.0, 256.0)
+# What short_side_for chooses from: never below the default (a smaller input is faster, but its
+# keypoints are coarser, and that cost is not measured); 480 runs at 7 fps on one core.
+SITE_SHORT_SIDES: Final[range] = range(DEFAULT_SHORT_SIDE, 480 + 1, 32)
+_PERSON_M: Final[float] = 1.7  # a standing adult, head to feet
+_CELL_M: Final[float] = 0.1
+_SHARE_SLACK: Final[float] = 0.02  # a smaller input within this share of the best is preferred: faster
+
+
+class SizeChoice(NamedTuple):
+    """The input size ``short_side_for`` chose for a camera.
+
+    Attributes:
+        short_side: the network input's short side, pixels.
+        share: of the floor points the camera sees, those where a standing person is within
+            ``PERSON_INPUT_PX`` in the input.
+        person_px: (smallest, largest) visible height of a standing person over those points, in
+            the camera's image, pixels.
+    """
+
+    short_side: int
+    share: float
+    person_px: tuple[float, float]
+
+
+def short_side_for(cam: Camera, floor: Sequence[Sequence[float]]) -> SizeChoice | None:
+    """The input short side at which MoveNet finds a standing person on most of the floor ``cam`` sees.
+
+    Each point of the floor (a 0.1 m grid) that the camera sees (``edge.floor.seen_by``) puts
+    a standing person (1.7 m) in the image; their visible height (clipped at the image's edges)
+    scales with the input. Of ``SITE_SHORT_SIDES`` (the default 256 and up: far people need
+    more pixels) the one with most points inside ``PERSON_INPUT_PX`` wins; a smaller one within
+    2% of its share is taken instead (faster).
+
+    Returns:
+        The choice, or None when the camera sees none of the floor.
+    """
+    from superbody.edge.camera import project
+    from superbody.edge.floor import point_in_polygon, seen_by
+
+    poly = np.asarray(floor, dtype=np.float64).reshape(-1, 2)
+    lo, hi = poly.min(axis=0), poly.max(axis=0)
+    gx, gy = (np.arange(a + _CELL_M / 2, b, _CELL_M) for a, b in zip(lo, hi))
+    xy = np.stack(np.meshgrid(gx, gy), axis=-1).reshape(-1, 2)
+    xy = xy[point_in_polygon(xy, poly)]
+    xy = xy[seen_by(cam, xy)]
+    if len(xy) == 0:
+        return None
+    feet, z_feet = project(np.column_stack([xy, np.zeros(len(xy))]), cam)
+    head, z_head = project(np.column_stack([xy, np.full(len(xy), _PERSON_M)]), cam)
+    # The visible part of the person, head to feet, rows clipped to the image; a point behind the
+    # camera's plane (depth <= 0) is off the image's far edge along its line of sight.
+    v_feet = np.where(z_feet > 0, feet[:, 1], cam.height)
+    v_head = np.where(z_head > 0, head[:, 1], 0.0)
+    rows = np.abs(np.clip(v_feet, 0, cam.height) - np.clip(v_head, 0, cam.height))  # (N,)
+    image_short = min(cam.width, cam.height)
+    shares = np.array([np.mean((rows * s / image_short >= PERSON_INPUT_PX[0]) & (rows * s / image_short <= PERSON_INPUT_PX[1]))
+                       for s in SITE_SHORT_SIDES])
+    k = int(np.flatnonzero(shares >= shares.max() - _SHARE_SLACK)[0])
+    return SizeChoice(SITE_SHORT_SIDES[k], float(shares[k]), (float(rows.min()), float(rows.max())))
 
 
 def default_model_path() -> Path:

@@ -19,7 +19,16 @@ import pytest
 from superbody.edge.body import INDEX, NUM_KEYPOINTS
 from superbody.edge.detectors import DetectorSpec, open_detector, parse_detector
 from superbody.edge.detectors.base import DetectorError, Letterbox
-from superbody.edge.detectors.movenet import COLUMNS, MoveNet, decode_movenet, default_model_path, network_size
+from superbody.edge.detectors.movenet import (
+    COLUMNS,
+    DEFAULT_SHORT_SIDE,
+    PERSON_INPUT_PX,
+    MoveNet,
+    decode_movenet,
+    default_model_path,
+    network_size,
+    short_side_for,
+)
 from tests.conftest import LAB_SITE, free_port
 from tests.edge.test_node import Listener
 from tests.media import VTEST_SIZE, image, media_path, movenet_model, vtest_frames
@@ -260,6 +269,63 @@ def test_a_larger_input_still_finds_the_walkers(movenet):
         big.close()
     with pytest.raises(DetectorError, match="after close"):
         big.detect(np.zeros((576, 768, 3), np.uint8))
+
+
+# -- the input size from the site -------------------------------------------------------------------
+
+
+def _hall_camera(f: float) -> tuple:
+    """A 640 x 480 camera 3 m up on the short wall of a 16 x 12 m hall, aimed at its middle; the hall's floor."""
+    from superbody.edge.camera import Camera, look_at_rotation
+
+    pos, target = np.array([0.1, 6.0, 3.0]), np.array([8.0, 6.0, 1.0])
+    R = look_at_rotation(pos, target)
+    cam = Camera(id="hall", width=640, height=480, fps=15.0, fx=f, fy=f, cx=320.0, cy=240.0, position=tuple(pos),
+                 rotation=tuple(tuple(float(v) for v in row) for row in R))
+    return cam, ((0.0, 0.0), (16.0, 0.0), (16.0, 12.0), (0.0, 12.0))
+
+
+def test_the_input_size_is_the_default_where_people_are_large_enough():
+    from superbody.edge.resources import site_path
+    from superbody.edge.site import load_site
+
+    for site in (load_site(LAB_SITE), load_site(site_path("wtf-apartment"))):
+        for cam in site.cameras:
+            choice = short_side_for(cam, site.floor)
+            assert choice is not None and choice.short_side == DEFAULT_SHORT_SIDE and choice.share > 0.98, (site.name, cam.id, choice)
+
+
+@pytest.mark.parametrize("f", [500.0, 400.0])
+def test_far_people_get_a_larger_input(f):
+    # At the default size the far end of the hall's people are under 32 px tall in the input
+    # (lost); the chosen size brings them back: the smallest that does.
+    cam, floor = _hall_camera(f)
+    choice = short_side_for(cam, floor)
+    assert choice is not None
+    smallest = choice.person_px[0] / min(cam.width, cam.height)
+    assert smallest * DEFAULT_SHORT_SIDE < PERSON_INPUT_PX[0]
+    assert choice.short_side > DEFAULT_SHORT_SIDE and choice.share > 0.98
+    # The smallest input that gets there (within the 2% of the floor it may leave for speed).
+    assert smallest * (choice.short_side - 32) < PERSON_INPUT_PX[0]
+
+
+def test_a_camera_that_sees_no_floor_gets_no_size():
+    cam, _ = _hall_camera(600.0)
+    assert short_side_for(cam, ((-9.0, 0.0), (-8.0, 0.0), (-8.0, 1.0), (-9.0, 1.0))) is None  # behind the camera
+
+
+def test_the_node_sizes_movenet_for_its_camera_unless_told():
+    import dataclasses
+
+    from superbody.edge.cli import _sized_for_site
+    from superbody.edge.site import load_site
+
+    cam, floor = _hall_camera(400.0)
+    site = dataclasses.replace(load_site(LAB_SITE), cameras=(cam,), floor=floor)
+    chosen = _sized_for_site(parse_detector("movenet"), site, "hall")
+    assert chosen.size == short_side_for(cam, floor).short_side > DEFAULT_SHORT_SIDE
+    assert _sized_for_site(parse_detector("movenet@320"), site, "hall").size == 320
+    assert _sized_for_site(parse_detector("blazepose"), site, "hall") == parse_detector("blazepose")
 
 
 # -- a camera node on vtest.avi ----------------------------------------------------------------------
