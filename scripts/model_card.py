@@ -253,12 +253,29 @@ def main(out_dir: Path, card: Path) -> int:
             b = svd["sim"]["view_buckets"][name]
             cells = [f"{a[k]:.2f} / {b[k]:.2f}" if a["views"] else f"- / {b[k]:.2f}" for k in ("share", "joints_mean", "few_joints", "at_edge")]
             L.append(f"| {name} | {a['views']} / {b['views']} | " + " | ".join(cells) + " |")
+        if "lr_disagreement" in svd["dev"]:
+            (ba, ta), (bb, tb) = svd["dev"]["lr_disagreement"], svd["sim"]["lr_disagreement"]
+            L += ["", f"Pairs of views that disagree about the person's left and right (label-free, the detector's swap rate; "
+                      f"`models.data.simstats.lr_disagreement`): dev.json {ba} of {ta} ({ba / max(ta, 1):.3f}), "
+                      f"simulator {bb} of {tb} ({bb / max(tb, 1):.3f})."]
     else:
         L += ["(not run)"]
     L += ["", "### Simulation only: a model that never saw real data", ""]
     L += _table([("GAT sim-only fp32", _model(sim, ".fp32.onnx")), ("GAT sim-only int8", _model(sim, ".int8.onnx")), ("analytic baseline", sim["baseline"])])
     L += ["", "int8 vs fp32 (never trained on dev.json): " + ", ".join(_int8_check(sim)), ""]
     L += _by_cameras([("GAT sim-only fp32", sim["by_cameras"]), ("analytic baseline", sim["baseline_by_cameras"])])
+    L += ["", "### No labelled data: the hybrid calibrated on simulation alone", "",
+          "What a new site gets (`superbody train --site S --geometry --calibrate-sim`): the simulation-only model above, its hybrid "
+          "calibration fitted on 4,000 simulated people of the site (`superbody calibrate hybrid-sim`, the detector noise model as "
+          "measured, not jittered), scored on dev.json, which neither step saw.", ""]
+    journey = _load(out_dir / "journey" / "eval.json")
+    if journey:
+        hyb = _model(journey, ".fp32.onnx")
+        L += _by_cameras([("hybrid (sim-calibrated) fp32", hyb["by_cameras"] if hyb else {}),
+                          ("analytic baseline", journey["baseline_by_cameras"])])
+        L += ["", "Live (`eval --temporal`), int8:", "", *_temporal(journey, ".int8.onnx")]
+    else:
+        L += ["(not run)"]
     L += ["", "### The paper's cells (2D features, its test split) for reference", "", "| training | MSE orientation | MSE position |", "| --- | --- | --- |"]
     L += [f"| {k} | {o} | {p} |" for k, (o, p) in PAPER.items()]
     L += ["", "### Site-independent model (random rooms only, never this layout)", ""]

@@ -25,7 +25,14 @@ sys.path.insert(0, str(ROOT))
 
 from superbody.edge import body  # noqa: E402
 from superbody.edge.site import load_site  # noqa: E402
-from superbody.models.data.simstats import facing_rates, path_floor, simulate, statistics, view_buckets  # noqa: E402
+from superbody.models.data.simstats import (  # noqa: E402
+    facing_rates,
+    lr_disagreement,
+    path_floor,
+    simulate,
+    statistics,
+    view_buckets,
+)
 from superbody.models.data.wtf import load_wtf  # noqa: E402
 
 
@@ -72,6 +79,10 @@ def main(dataset: str, site: str, seconds: float, seed: int, json_out: str | Non
     norm = ra / (ra @ (ca / ca.sum()))[:, None]
     for j, name in enumerate(body.KEYPOINTS):
         print("    (" + ", ".join(f"{x:.2f}" for x in norm[j]) + f"),  # {name}")
+    (ba, ta), (bb, tb) = lr_disagreement(real, st), lr_disagreement(sim, st)
+    a["lr_disagreement"], b["lr_disagreement"] = [ba, ta], [bb, tb]
+    print("  view pairs that disagree about the person's left and right (label-free; edge.sim.NoiseModel.swap_prob):")
+    print(f"    {ba}/{ta} = {ba / max(ta, 1):.3f} dev.json, {bb}/{tb} = {bb / max(tb, 1):.3f} simulator")
     # The buckets: the simulated person over the whole floor (far and cut-off views the recording has few of).
     whole_truth: list = []
     whole = simulate(site, seconds, seed, rate, truths=whole_truth)

@@ -64,6 +64,14 @@ $SB eval --dataset "$DEV" --site "$SITE" --model "$OUT/wtf-sim.fp32.onnx" --mode
     --json-out "$OUT/eval-sim.json" | tee "$OUT/eval-sim.txt"
 $SB eval --dataset "$DEV" --site "$SITE" --model "$OUT/site-independent.fp32.onnx" --model "$OUT/site-independent.int8.onnx" \
     --temporal --json-out "$OUT/eval-site-independent.json" | tee "$OUT/eval-site-independent.txt"
+# The no-ground-truth journey of a new site: the simulation-only model with its hybrid calibrated on
+# simulation alone (what `train --calibrate-sim` does), scored on dev.json, which it never saw.
+mkdir -p "$OUT/journey"
+cp "$OUT/wtf-sim.fp32.onnx" "$OUT/wtf-sim.int8.onnx" "$OUT/journey/"
+$SB calibrate hybrid-sim --site "$SITE" --model "$OUT/journey/wtf-sim.fp32.onnx" --model "$OUT/journey/wtf-sim.int8.onnx" \
+    --json-out "$OUT/journey/hybrid-sim.json" | tee "$OUT/journey/hybrid-sim.txt"
+$SB eval --dataset "$DEV" --site "$SITE" --model "$OUT/journey/wtf-sim.fp32.onnx" --model "$OUT/journey/wtf-sim.int8.onnx" \
+    --temporal --json-out "$OUT/journey/eval.json" | tee "$OUT/journey/eval.txt"
 
 # 2. The shipped network's fine-tuning, cross-validated twice and run on all of dev.json; two
 # queues, one per core. (crossval ... m1: the file names keep the member's name.)

@@ -84,7 +84,12 @@ class NoiseModel:
         score_mean, score_std: the reported confidence of a detected joint, before clipping to
             [score_threshold, 1].
         score_threshold: nothing below this confidence is reported (OpenPifPaf used 0.5).
-        swap_prob: probability that a view has its left and right joints swapped.
+        swap_prob: probability that a view has its left and right joints swapped. Measured
+            without labels (``models.data.simstats.lr_disagreement``: pairs of views whose rays
+            meet better with one view's sides swapped): dev.json 2 of 246 view pairs (0.008);
+            the simulator 0.004 at 0, 0.015 at 0.005, 0.024 at 0.01 and 0.057 at 0.03 (the
+            earlier guess, which made geometry's yaw fail 3-5 times as often as it does on
+            dev.json). Two disagreements pin it loosely: 0.002, at most ~0.013 (95%).
         spurious_prob: probability per frame of a spurious partial person.
         view_miss_prob: probability that the detector misses a person entirely in a view.
         truncated_miss_prob: extra miss probability for a person whose joints are all out of
@@ -103,7 +108,7 @@ class NoiseModel:
     score_mean: float = 0.805
     score_std: float = 0.105
     score_threshold: float = 0.5
-    swap_prob: float = 0.03
+    swap_prob: float = 0.005
     spurious_prob: float = 0.01
     view_miss_prob: float = 0.2
     truncated_miss_prob: float = 0.3

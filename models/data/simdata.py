@@ -35,6 +35,10 @@ from superbody.models.data.samples import Sample
 
 __all__ = ["SimDataConfig", "generate", "random_site", "save_samples", "load_samples"]
 _CHUNK = 400
+# Training sees up to this share of views with left and right swapped, more than the measured
+# detector (NoiseModel.swap_prob): another site's detector may swap more, and a network that has
+# seen swaps is robust to them.
+TRAIN_SWAP_MAX = 0.06
 
 
 @dataclass(frozen=True)
@@ -81,7 +85,7 @@ def _jitter(noise: NoiseModel, rng: np.random.Generator) -> NoiseModel:
         noise,
         pixel_noise_px=noise.pixel_noise_px * float(rng.uniform(0.6, 1.8)),
         joint_rate=tuple(float(np.clip(r + rng.normal(0, 0.05), 0.05, 1.0)) for r in noise.joint_rate),
-        swap_prob=float(rng.uniform(0.0, 2.0 * noise.swap_prob)),
+        swap_prob=float(rng.uniform(0.0, TRAIN_SWAP_MAX)),
         view_miss_prob=float(np.clip(noise.view_miss_prob + rng.normal(0, 0.05), 0.0, 0.5)),
     )
 

@@ -14,7 +14,8 @@ from superbody.edge import body
 from superbody.edge.sim import NoiseModel, SimCamera, World
 from superbody.edge.site import Site, load_site
 
-__all__ = ["statistics", "simulate", "facing_rates", "view_buckets", "path_floor", "FACING_BINS", "DISTANCE_BINS_M", "EDGE_PX"]
+__all__ = ["statistics", "simulate", "facing_rates", "view_buckets", "lr_disagreement", "path_floor", "FACING_BINS",
+           "DISTANCE_BINS_M", "EDGE_PX"]
 
 FACING_BINS = 8
 DISTANCE_BINS_M = (2.0, 3.0, 4.0, 5.0)  # edges of the distance buckets: < 2, 2-3, 3-4, 4-5, >= 5 m
@@ -101,6 +102,48 @@ def view_buckets(samples: list[dict], truths: list, site: Site) -> dict[str, dic
         out[name] = {"views": n, "share": n / max(len(d), 1), "joints_mean": float(j[m].mean()) if n else math.nan,
                      "few_joints": float((j[m] <= 8).mean()) if n else math.nan, "at_edge": float(e[m].mean()) if n else math.nan}
     return out
+
+
+_TORSO = (body.LEFT_SHOULDER, body.RIGHT_SHOULDER, body.LEFT_HIP, body.RIGHT_HIP)
+_TORSO_MIRRORED = (body.RIGHT_SHOULDER, body.LEFT_SHOULDER, body.RIGHT_HIP, body.LEFT_HIP)
+
+
+def lr_disagreement(samples: list[dict], site: Site) -> tuple[int, int]:
+    """How often two cameras disagree about which side of a person is the left: needs no truth.
+
+    For every pair of views of one instant that both report the four torso joints, each joint's
+    two rays should nearly meet. A pair disagrees when its rays meet at least twice as closely
+    (summed over the four joints) with one view's left and right joints swapped: one of the two
+    detections mislabelled the sides. The share grows with the detector's swap rate (about
+    twice the rate, less the side-on views in which a swap changes little).
+
+    Args:
+        samples: {camera id: (17, 3) keypoints} per instant, one person.
+        site: the cameras.
+
+    Returns:
+        ``(disagreeing, pairs)``.
+    """
+    from itertools import combinations
+
+    from superbody.edge.camera import pixel_to_ray
+
+    def gap(o1: np.ndarray, d1: np.ndarray, o2: np.ndarray, d2: np.ndarray) -> float:
+        n = np.cross(d1, d2)  # (4, 3) common normals: the rays' closest distance along them
+        return float((np.abs(n @ (o2 - o1)) / np.maximum(np.linalg.norm(n, axis=1), 1e-9)).sum())
+
+    bad = total = 0
+    for s in samples:
+        rays = []
+        for cam_id, kp in s.items():
+            if not np.isnan(kp[list(_TORSO), 0]).any():
+                cam = site.camera(cam_id)
+                o, d = pixel_to_ray(kp[list(_TORSO), :2].astype(np.float64), cam)
+                rays.append((o, d, pixel_to_ray(kp[list(_TORSO_MIRRORED), :2].astype(np.float64), cam)[1]))
+        for (oa, da, _), (ob, db, db_swapped) in combinations(rays, 2):
+            total += 1
+            bad += gap(oa, da, ob, db_swapped) < 0.5 * gap(oa, da, ob, db)
+    return bad, total
 
 
 def path_floor(xy: np.ndarray, margin_m: float = 0.3) -> tuple[tuple[float, float], ...]:

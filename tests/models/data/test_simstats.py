@@ -1,11 +1,14 @@
 """The simulator's detector statistics stay close to the real dev.json."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from superbody.edge import body
+from superbody.edge.sim import NoiseModel
 from superbody.edge.site import load_site
-from superbody.models.data.simstats import facing_rates, path_floor, simulate, statistics
+from superbody.models.data.simstats import facing_rates, lr_disagreement, path_floor, simulate, statistics
 from superbody.models.data.wtf import load_wtf
 from tests.conftest import WTF_SITE
 
@@ -60,3 +63,19 @@ def test_views_per_person_and_joint_rates_match(both):
         assert sim["views_per_person"][k] == pytest.approx(real["views_per_person"][k], abs=0.2)
     worst = max(abs(sim["joint_rate"][j] - real["joint_rate"][j]) for j in real["joint_rate"])
     assert worst < 0.2
+
+
+def test_left_right_swaps_are_measured_without_labels_and_as_rare_as_in_the_real_file(runs, dev_json):
+    """Two views of one instant disagree about the person's left and right about as often in the
+    simulator as in dev.json; a detector that swaps more is seen to (NoiseModel.swap_prob)."""
+    site = load_site(WTF_SITE)
+    (real, _), (sim, _) = runs
+    bad_real, pairs_real = lr_disagreement(real, site)
+    bad_sim, pairs_sim = lr_disagreement(sim, site)
+    assert pairs_real > 200 and pairs_sim > 200
+    assert bad_real / pairs_real < 0.03 and bad_sim / pairs_sim < 0.04
+    floor = path_floor(np.array([s.truth[:2] for s in load_wtf(dev_json)]))
+    swappy = simulate(str(WTF_SITE), seconds=120, seed=3, rate_hz=8.0, progress=False, floor=floor,
+                      noise=dataclasses.replace(NoiseModel(), swap_prob=0.1))
+    bad, pairs = lr_disagreement(swappy, site)
+    assert bad / pairs > 0.08
