@@ -97,7 +97,7 @@ def short_side_for(cam: Camera, floor: Sequence[Sequence[float]]) -> SizeChoice 
     lo, hi = poly.min(axis=0), poly.max(axis=0)
     gx, gy = (np.arange(a + _CELL_M / 2, b, _CELL_M) for a, b in zip(lo, hi))
     xy = np.stack(np.meshgrid(gx, gy), axis=-1).reshape(-1, 2)
-    xy = xy[point_in_polygon(xy, poly)]
+    xy = xy[point_in_polygon(xy, floor)]
     xy = xy[seen_by(cam, xy)]
     if len(xy) == 0:
         return None
