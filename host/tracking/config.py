@@ -60,6 +60,9 @@ class TrackerConfig:
         min_separation_m: a candidate closer than this to a confirmed person is that person, not
             a newcomer, and two confirmed tracks that stay this close are merged
             (``host.tracking.evidence``; 0 turns the rule off).
+        same_body_sigmas: two views in a person's set S must put them within this many of their
+            ground points' combined 1-sigmas of each other, or the largest agreeing group is used
+            (``host.tracking.evidence.one_body``; 0 turns the rule off).
         restart_gap_s: a camera whose sequence number goes back is taken as restarted (its
             frames are admitted again) after this long without frames from it, when the frame
             after a refused one continues the new count, or after ``Tracker.reset_camera``;
@@ -85,6 +88,7 @@ class TrackerConfig:
     restart_gap_s: float = 1.0
     confirm_min_support: float = 0.5
     min_separation_m: float = 0.3
+    same_body_sigmas: float = 2.5
 
     def __post_init__(self) -> None:
         _check("confirm_after_s", self.confirm_after_s, 0.0, 600.0)
@@ -106,3 +110,4 @@ class TrackerConfig:
         _check("restart_gap_s", self.restart_gap_s, 0.0, 600.0)
         _check("confirm_min_support", self.confirm_min_support, 0.0, 1.0)
         _check("min_separation_m", self.min_separation_m, 0.0, 2.0)
+        _check("same_body_sigmas", self.same_body_sigmas, 0.0, 100.0)

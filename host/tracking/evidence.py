@@ -22,6 +22,14 @@ keep landing inside a candidate's gate. Two physical facts tell them from people
   one person whose views went to two tracks: the younger is removed (``Tracker.prune``). Torsos are about 0.25 m deep and 0.4 m
   wide, so centres closer than 0.3 m are one body; people standing shoulder to shoulder, or
   hugging, stay further apart than that.
+- **A person's views show one body.** Each camera's latest view of a person (set S) was matched
+  to them on its own; in a crowd a camera's view of a neighbour can join a track, and a track
+  built from two people's views stands between them, where it keeps drawing views of both.
+  Before set S is used (``one_body``), every two of its views must put the person at floor
+  points that agree within ``TrackerConfig.same_body_sigmas`` of their combined ground-point
+  sigmas (``host.tracking.ground``); the view that disagrees with most others is left out
+  (ties: the one farthest from the track's position) until the rest agree, and those left out
+  wait for their cameras' next frames.
 """
 
 from __future__ import annotations
@@ -35,9 +43,9 @@ from superbody.edge.camera import Camera, project
 from superbody.edge.floor import detectable_range_m
 from superbody.edge.site import Obstacle, obstacles_hide
 from superbody.host.tracking.motion import _NS_PER_S
-from superbody.host.tracking.track import Track
+from superbody.host.tracking.track import StampedView, Track
 
-__all__ = ["EDGE_MARGIN", "MERGE_AFTER_S", "TORSO_CENTRE_M", "clearly_sees", "too_close", "coincident", "seen_together"]
+__all__ = ["EDGE_MARGIN", "MERGE_AFTER_S", "TORSO_CENTRE_M", "clearly_sees", "too_close", "coincident", "seen_together", "one_body"]
 
 TORSO_CENTRE_M = 1.15  # height of a standing adult's torso centre (between hips 0.9 m and shoulders 1.4 m)
 EDGE_MARGIN = 0.1  # fraction of the image's width and height left out on each side
@@ -98,3 +106,35 @@ def seen_together(a: Track, b: Track) -> bool:
     detections in one frame are two people (or one person split by a detector, which the
     candidate rule catches), never one person whose views went to two tracks."""
     return any(b.views.get(cam) is not None and b.views[cam].stamp_ns == sv.stamp_ns for cam, sv in a.views.items())
+
+
+def one_body(views: dict[str, StampedView], near_xy: NDArray | None, sigmas: float) -> list[str]:
+    """The cameras whose views of one person agree on where they stand (module docstring).
+
+    Args:
+        views: set S, camera id -> its view with its ground point.
+        near_xy: (2,) the track's position, to break ties; None: the views with most joints win.
+        sigmas: two ground points agree when within this many of their combined 1-sigmas.
+
+    Returns:
+        The camera ids kept, in ``views``' order. A view with no ground point agrees with all.
+    """
+    cams = list(views)
+    if len(cams) < 2:
+        return cams
+    xy = np.array([views[c].ground_xy for c in cams], dtype=np.float64)  # (V, 2)
+    var = np.array([views[c].ground_std_m for c in cams], dtype=np.float64) ** 2  # (V,)
+    with np.errstate(invalid="ignore"):
+        gap = np.linalg.norm(xy[:, None] - xy[None], axis=2)  # (V, V), NaN without a ground point
+        agree = ~(gap > sigmas * np.sqrt(var[:, None] + var[None]))  # NaN compares False: agrees
+    keep = np.ones(len(cams), bool)
+    # Drop the view that disagrees with most of the others until the rest all agree; ties: the
+    # one farthest from the track, then the one with fewest joints.
+    far = np.linalg.norm(xy - near_xy, axis=1) if near_xy is not None else np.zeros(len(cams))
+    joints = np.array([views[c].view.num_visible for c in cams])
+    while True:
+        against = ((~agree) & keep[None] & keep[:, None]).sum(axis=1)  # (V,) among the views kept
+        if not against.any():
+            return [c for c, k in zip(cams, keep) if k]
+        order = np.lexsort((joints, -np.nan_to_num(far), -against))  # most disagreements first
+        keep[order[0]] = False

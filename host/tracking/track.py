@@ -19,10 +19,13 @@ _BINS = HIST_BINS[0] * HIST_BINS[1]
 
 
 class StampedView(NamedTuple):
-    """A view and the capture time of its frame (UNIX ns)."""
+    """A view, the capture time of its frame (UNIX ns), and where it puts the person on the floor
+    (``host.tracking.ground``: metres, and its 1-sigma; NaN when it gave none)."""
 
     stamp_ns: int
     view: PersonView
+    ground_xy: tuple[float, float] = (math.nan, math.nan)
+    ground_std_m: float = math.nan
 
 
 @dataclass(eq=False)

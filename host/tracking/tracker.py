@@ -59,7 +59,7 @@ from superbody.edge.messages.observation import Observation, PersonView
 from superbody.edge.site import Site
 from superbody.host.tracking.association import FrameViews, Match, _amplitudes, _median_over_history, assign, duplicate_views
 from superbody.host.tracking.config import TrackerConfig
-from superbody.host.tracking.evidence import clearly_sees, coincident, too_close
+from superbody.host.tracking.evidence import clearly_sees, coincident, one_body, too_close
 from superbody.host.tracking.ground import ground_points
 from superbody.host.tracking.motion import _NS_PER_S, fuse_positions, predict_positions
 from superbody.host.tracking.reid import Lost, remembered_as
@@ -91,7 +91,7 @@ _STATS = (
     "observations", "views", "late_dropped", "duplicate_dropped", "stale_dropped", "seq_backwards_dropped", "wrong_site",
     "unknown_camera", "too_few_joints", "track_cap", "evicted_candidates", "too_few_joints_new", "no_ground_point", "no_signature",
     "unplaced_new", "suppressed", "duplicate_views", "matched", "new_candidates", "confirmed", "removed", "dropped_candidates", "reidentified",
-    "merged",
+    "merged", "views_of_another_body",
 )
 
 
@@ -242,7 +242,7 @@ class Tracker:
         fused: list[tuple[Track, int]] = []
         for r, c in zip(rows, cols, strict=True):
             tr, i = tracks[c], int(views.idx[r])
-            self._apply(tr, obs.camera, t, obs.people[i], views.hists[r], views.amps[r], views.has_colour[r])
+            self._apply(tr, obs.camera, t, obs.people[i], views, r)
             fused.append((tr, r))
             matches[i] = Match(i, tr.id, "matched", float(colour_d[r, c]), float(geo_d[r, c]))
             self.stats["matched"] += 1
@@ -283,7 +283,7 @@ class Tracker:
             self._next_id += 1
             self._tracks[tr.id] = tr
             st["new_candidates"] += 1
-            self._apply(tr, obs.camera, t, obs.people[i], views.hists[r], views.amps[r], views.has_colour[r])
+            self._apply(tr, obs.camera, t, obs.people[i], views, int(r))
             fused.append((tr, int(r)))
             matches[i] = Match(i, tr.id, "created")
         return fused
@@ -383,15 +383,15 @@ class Tracker:
         self.stats["evicted_candidates"] += 1
         return True
 
-    def _apply(self, tr: Track, camera: str, t: int, view: PersonView, hist: NDArray, amp: NDArray, has_colour: bool) -> None:
-        """Record a view matched to (or starting) ``tr``; confirm it when its time has come."""
+    def _apply(self, tr: Track, camera: str, t: int, view: PersonView, views: FrameViews, r: int) -> None:
+        """Record a view (row ``r`` of ``views``) matched to (or starting) ``tr``; confirm it when its time has come."""
         if t - tr.last_seen_ns > self._gap_ns:
             tr._streak_ns, tr._chances, tr._support = t, 1, 1
         tr.last_seen_ns = max(tr.last_seen_ns, t)
         tr.hits += 1
-        tr.views[camera] = StampedView(t, view)
-        if has_colour:
-            tr._add_histogram(hist, amp)
+        tr.views[camera] = StampedView(t, view, (float(views.ground[r, 0]), float(views.ground[r, 1])), float(views.sigma[r]))
+        if views.has_colour[r]:
+            tr._add_histogram(views.hists[r], views.amps[r])
         if tr.state == "candidate" and tr.last_seen_ns - tr._streak_ns >= self._confirm_ns and self._may_confirm(tr):
             tr.state, tr.confirmed_ns = "confirmed", t
             self.stats["confirmed"] += 1
@@ -484,9 +484,14 @@ class Tracker:
         if not (freshness_s > 0 and math.isfinite(freshness_s)):
             raise ValueError(f"view_sets: freshness_s must be a positive number of seconds, got {freshness_s!r}")
         fresh_ns = round(freshness_s * _NS_PER_S)
+        sigmas = self.config.same_body_sigmas
         out: dict[int, dict[str, PersonView]] = {}
         for tr in self.people(now_ns):
-            s = {cam: sv.view for cam, sv in tr.views.items() if now_ns - sv.stamp_ns <= fresh_ns}
-            if s:
-                out[tr.id] = s
+            fresh = {cam: sv for cam, sv in tr.views.items() if now_ns - sv.stamp_ns <= fresh_ns}
+            if len(fresh) > 1 and sigmas > 0:
+                kept = one_body(fresh, tr.position, sigmas)
+                self.stats["views_of_another_body"] += len(fresh) - len(kept)
+                fresh = {cam: fresh[cam] for cam in kept}
+            if fresh:
+                out[tr.id] = {cam: sv.view for cam, sv in fresh.items()}
         return out

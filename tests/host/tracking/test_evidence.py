@@ -12,7 +12,7 @@ from superbody.host.tracking.config import TrackerConfig
 from superbody.host.tracking.evidence import EDGE_MARGIN, MERGE_AFTER_S, clearly_sees, coincident, too_close
 from superbody.host.tracking.track import Track
 from superbody.host.tracking.tracker import Tracker
-from tests.host.tracking.test_tracker import C1, CAMS, SITE, T0, S, frame, schedule
+from tests.host.tracking.test_tracker import C1, C2, CAMS, SITE, T0, S, frame, make_camera, schedule
 
 
 def test_a_camera_clearly_sees_its_middle_not_its_edges_nor_behind_it():
@@ -140,3 +140,55 @@ def test_two_people_side_by_side_are_both_kept():
         tr.update(frame(cam, t, people, seed=k)[0])
         tr.prune(t)
     assert len(tr.people(T0 + 4 * S)) == 2 and tr.stats["merged"] == 0
+
+
+# -- a person's views show one body --------------------------------------------------------------
+
+
+def _stamped(cam, x: float, y: float, std: float = 0.1, t: int = T0):
+    """cam's view of a person at (x, y), with the ground point host.tracking.ground gives it."""
+    from superbody.host.tracking.ground import ground_point
+    from superbody.host.tracking.track import StampedView
+    from tests.host.tracking.test_tracker import colour, person_view
+
+    v = person_view(cam, x, y, 0.0, colour(30.0, 0.0, 0))
+    xy, _ = ground_point(v, cam)
+    return StampedView(t, v, (float(xy[0]), float(xy[1])), std)
+
+
+def test_views_of_two_bodies_keep_the_larger_group():
+    from superbody.host.tracking.evidence import one_body
+
+    c4 = make_camera("c4", (4.5, -4.5, 2.6))
+    views = {"c1": _stamped(C1, 0.0, 0.0), "c2": _stamped(C2, 0.0, 0.0), "c3": _stamped(CAMS[2], 0.8, 0.0), "c4": _stamped(c4, 0.0, 0.0)}
+    assert one_body(views, None, 2.5) == ["c1", "c2", "c4"]
+    # Within the sigmas the same views agree: a far, unsure view (1 m sigma) joins either group.
+    views["c3"] = views["c3"]._replace(ground_std_m=1.0)
+    assert one_body(views, None, 2.5) == ["c1", "c2", "c3", "c4"]
+
+
+def test_two_disagreeing_views_keep_the_one_by_the_track():
+    from superbody.host.tracking.evidence import one_body
+
+    views = {"c1": _stamped(C1, 0.0, 0.0), "c2": _stamped(C2, 0.8, 0.0)}
+    assert one_body(views, np.array([0.75, 0.05]), 2.5) == ["c2"]
+    assert one_body(views, np.array([0.05, 0.0]), 2.5) == ["c1"]
+    # A view with no ground point says nothing against the others.
+    views["c3"] = views["c2"]._replace(ground_xy=(np.nan, np.nan), ground_std_m=np.nan)
+    assert one_body(views, np.array([0.05, 0.0]), 2.5) == ["c1", "c3"]
+
+
+@pytest.mark.parametrize("sigmas", [2.5, 0.0])
+def test_set_s_leaves_out_a_view_of_somebody_else(sigmas):
+    """A confirmed person's set S holds another person's view from one camera (as a crowd's
+    association can leave it): it is not used, unless the rule is off."""
+    tracker = Tracker(SITE, TrackerConfig(same_body_sigmas=sigmas))
+    people = {"a": (0.0, 0.0, 0.0, 30.0)}
+    for cam, t in schedule(3.0):
+        tracker.update(frame(cam, t, people)[0])
+    (track,) = tracker.people(T0 + 3 * S)
+    now = max(sv.stamp_ns for sv in track.views.values())
+    track.views["c3"] = _stamped(CAMS[2], 0.9, 0.2, t=now)
+    got = tracker.view_sets(now)[track.id]
+    assert sorted(got) == (["c1", "c2"] if sigmas else ["c1", "c2", "c3"])
+    assert tracker.stats["views_of_another_body"] == (1 if sigmas else 0)
