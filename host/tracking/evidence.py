@@ -14,15 +14,6 @@ keep landing inside a candidate's gate. Two physical facts tell them from people
   of their frames; the coat, reported by one of the three cameras that see its spot, in at most
   a third of them. A camera that sees the spot only near its image edge (where a detector may
   miss a person cut in half) gives no chance, so people cut off at the edges are not penalised.
-  The same count goes on for confirmed people, window by window (``TrackerConfig.confirm_after_s``
-  each): a person whose cameras matched them in under ``UNSUPPORTED_SHARE`` of the support a
-  candidate needs, over at least ``MIN_CHANCES`` chances, is no longer there: the track is
-  removed and not remembered (``Tracker.prune``, stat ``unsupported``). A confirmed track that
-  a detector's random false positives keep matching (they land anywhere, a few a second) would
-  otherwise wander the room for as long as they come. In the simulated scenes traced
-  (``benchmarks.scenes`` a, c, d, g, j) real people, in crowds, behind each other, under 1 m
-  cameras and at the image edges, kept 0.50-1.00 of their chances in every 2 s window; such a
-  track kept 0.06-0.18.
 - **Two people cannot stand inside each other.** A candidate whose position lies within
   ``TrackerConfig.min_separation_m`` of a confirmed person's is that person seen again (a
   detector's second, partial skeleton of them, another camera's odd colours), not a newcomer:
@@ -54,13 +45,7 @@ from superbody.edge.site import Obstacle, obstacles_hide
 from superbody.host.tracking.motion import _NS_PER_S
 from superbody.host.tracking.track import StampedView, Track
 
-# A confirmed person matched in under this share of confirm_min_support of their chances in a
-# window is gone; fewer chances than MIN_CHANCES in a window say nothing.
-UNSUPPORTED_SHARE = 0.5
-MIN_CHANCES = 10
-
-__all__ = ["EDGE_MARGIN", "MERGE_AFTER_S", "MIN_CHANCES", "TORSO_CENTRE_M", "UNSUPPORTED_SHARE", "clearly_sees", "too_close", "coincident",
-           "seen_together", "one_body"]
+__all__ = ["EDGE_MARGIN", "MERGE_AFTER_S", "TORSO_CENTRE_M", "clearly_sees", "too_close", "coincident", "seen_together", "one_body"]
 
 TORSO_CENTRE_M = 1.15  # height of a standing adult's torso centre (between hips 0.9 m and shoulders 1.4 m)
 EDGE_MARGIN = 0.1  # fraction of the image's width and height left out on each side

@@ -60,12 +60,10 @@ class Track:
     _kf_t: int | None = field(default=None, init=False, repr=False)  # time of the position state
     _kf_x: NDArray[np.float64] = field(init=False, repr=False)  # (2, 2): rows (pos, vel), columns (x, y)
     _kf_P: NDArray[np.float64] = field(init=False, repr=False)  # (2, 2) shared by both columns
-    # Since the steady matches began, for a candidate; since ``_window_ns``, for a confirmed person
-    # (host.tracking.evidence): frames of cameras that clearly saw where it stood, or matched it
-    # (chances), and those that matched it.
+    # Since the steady matches began (host.tracking.evidence): frames of cameras that clearly saw
+    # where the candidate stood, or matched it (chances), and those that matched it.
     _chances: int = field(default=1, init=False, repr=False)
     _support: int = field(default=1, init=False, repr=False)
-    _window_ns: int = field(default=0, init=False, repr=False)
     _close_since_ns: int | None = field(default=None, init=False, repr=False)  # confirmed: inside another since
 
     def __post_init__(self) -> None:

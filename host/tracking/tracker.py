@@ -59,7 +59,7 @@ from superbody.edge.messages.observation import Observation, PersonView
 from superbody.edge.site import Site
 from superbody.host.tracking.association import FrameViews, Match, _amplitudes, _median_over_history, assign, duplicate_views
 from superbody.host.tracking.config import TrackerConfig
-from superbody.host.tracking.evidence import MIN_CHANCES, UNSUPPORTED_SHARE, clearly_sees, coincident, one_body, too_close
+from superbody.host.tracking.evidence import clearly_sees, coincident, one_body, too_close
 from superbody.host.tracking.ground import ground_points
 from superbody.host.tracking.motion import _NS_PER_S, fuse_positions, predict_positions
 from superbody.host.tracking.reid import Lost, remembered_as
@@ -91,7 +91,7 @@ _STATS = (
     "observations", "views", "late_dropped", "duplicate_dropped", "stale_dropped", "seq_backwards_dropped", "wrong_site",
     "unknown_camera", "too_few_joints", "track_cap", "evicted_candidates", "too_few_joints_new", "no_ground_point", "no_signature",
     "unplaced_new", "suppressed", "duplicate_views", "matched", "new_candidates", "confirmed", "removed", "dropped_candidates", "reidentified",
-    "merged", "views_of_another_body", "unsupported",
+    "merged", "views_of_another_body",
 )
 
 
@@ -289,8 +289,8 @@ class Tracker:
         return fused
 
     def _count_chances(self, camera: str, tracks: list[Track], cols: NDArray) -> None:
-        """Each placed track's chance to be seen in this frame, and whether it was (``host.tracking.evidence``)."""
-        idx = [j for j, tr in enumerate(tracks) if tr._kf_t is not None]
+        """Each placed candidate's chance to be seen in this frame, and whether it was (``host.tracking.evidence``)."""
+        idx = [j for j, tr in enumerate(tracks) if tr.state == "candidate" and tr._kf_t is not None]
         if not idx:
             return
         seen = clearly_sees(self._cameras[camera], np.array([tracks[j]._kf_x[0] for j in idx]), self.site.obstacles)
@@ -394,7 +394,6 @@ class Tracker:
             tr._add_histogram(views.hists[r], views.amps[r])
         if tr.state == "candidate" and tr.last_seen_ns - tr._streak_ns >= self._confirm_ns and self._may_confirm(tr):
             tr.state, tr.confirmed_ns = "confirmed", t
-            tr._window_ns, tr._chances, tr._support = t, 0, 0
             self.stats["confirmed"] += 1
             self._reidentify(tr, t)
 
@@ -446,10 +445,9 @@ class Tracker:
         return ok
 
     def prune(self, now_ns: int) -> list[Track]:
-        """Remove tracks unseen for ``remove_after_s``, the younger of two confirmed tracks that
-        stood inside each other for ``MERGE_AFTER_S``, and confirmed tracks their cameras stopped
-        seeing (``host.tracking.evidence``); return them."""
-        merged = self._merge_coincident(now_ns) + self._drop_unsupported(now_ns)
+        """Remove tracks unseen for ``remove_after_s``, and the younger of two confirmed tracks that
+        stood inside each other for ``MERGE_AFTER_S`` (``host.tracking.evidence``); return them."""
+        merged = self._merge_coincident(now_ns)
         gone = [tr for tr in self._tracks.values() if now_ns - tr.last_seen_ns >= self._remove_ns]
         for tr in gone:
             del self._tracks[tr.id]
@@ -461,20 +459,6 @@ class Tracker:
             del self._lost[next(iter(self._lost))]
         self._forget_lost(now_ns)
         return merged + gone
-
-    def _drop_unsupported(self, now_ns: int) -> list[Track]:
-        """Confirmed tracks whose cameras, over a window of ``confirm_after_s``, matched them in under
-        ``UNSUPPORTED_SHARE`` of the support a candidate needs, removed (not remembered for re-identification)."""
-        share = UNSUPPORTED_SHARE * self.config.confirm_min_support
-        window = max(self._confirm_ns, 1)
-        out = []
-        for tr in [t for t in self._tracks.values() if t.state == "confirmed" and now_ns - t._window_ns >= window]:
-            if share > 0 and tr._chances >= MIN_CHANCES and tr._support < share * tr._chances:
-                del self._tracks[tr.id]
-                out.append(tr)
-            tr._window_ns, tr._chances, tr._support = now_ns, 0, 0
-        self.stats["unsupported"] += len(out)
-        return out
 
     def _merge_coincident(self, now_ns: int) -> list[Track]:
         """The younger of two confirmed tracks closer than ``min_separation_m`` for ``MERGE_AFTER_S``, removed."""

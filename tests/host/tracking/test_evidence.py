@@ -192,25 +192,3 @@ def test_set_s_leaves_out_a_view_of_somebody_else(sigmas):
     got = tracker.view_sets(now)[track.id]
     assert sorted(got) == (["c1", "c2"] if sigmas else ["c1", "c2", "c3"])
     assert tracker.stats["views_of_another_body"] == (1 if sigmas else 0)
-
-
-@pytest.mark.parametrize("min_support", [0.5, 0.0])
-def test_a_person_their_cameras_stop_seeing_is_removed(min_support):
-    """Person a is confirmed, then only c1 reports them, in every other frame (as a detector's
-    false positives would keep a track alive): c2 and c3 see the spot and report nobody. The
-    track goes within two windows, is not remembered, and a person in full view stays."""
-    tracker = Tracker(SITE, TrackerConfig(confirm_min_support=min_support))
-    a, b = {"a": (0.0, 0.0, 0.0, 30.0)}, {"b": (2.0, 1.0, 0.0, 150.0)}
-    for cam, t in schedule(3.0):
-        tracker.update(frame(cam, t, a | b)[0])
-    assert len(tracker.people(T0 + 3 * S)) == 2
-    for k, (cam, t) in enumerate(schedule(6.0)):
-        t += 3 * S
-        tracker.update(frame(cam, t, (a if cam is C1 and k % 2 else {}) | b)[0])
-        tracker.prune(t)
-    left = tracker.people(T0 + 9 * S)
-    if min_support:
-        assert len(left) == 1 and tracker.stats["unsupported"] == 1 and not tracker._lost
-        assert np.linalg.norm(left[0].position - (2.0, 1.0)) < 0.3  # b, in full view, stays
-    else:
-        assert len(left) == 2 and tracker.stats["unsupported"] == 0
