@@ -32,8 +32,8 @@ from numpy.typing import NDArray
 from superbody.edge.camera import Camera, project
 
 __all__ = [
-    "TORSO_HEIGHTS_M", "MIN_PERSON_PX", "detectable_range_m", "seen_by", "views_at", "in_front", "visible_floor",
-    "point_in_polygon",
+    "TORSO_HEIGHTS_M", "MIN_PERSON_PX", "PERSON_HEIGHT_M", "detectable_range_m", "seen_by", "views_at", "in_front", "visible_floor",
+    "point_in_polygon", "floor_points",
 ]
 
 TORSO_HEIGHTS_M = (0.9, 1.4)  # hips and shoulders of a standing adult (edge.body's typical heights)
@@ -152,3 +152,12 @@ def point_in_polygon(xy: NDArray, polygon: Sequence[Sequence[float]]) -> NDArray
     with np.errstate(divide="ignore", invalid="ignore"):
         xc = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
     return (np.sum(crosses & (x < xc), axis=1) % 2) == 1
+
+
+def floor_points(polygon: Sequence[Sequence[float]], cell_m: float) -> NDArray[np.float64]:
+    """(N, 2) the centres of a ``cell_m`` grid's cells that lie inside the polygon."""
+    poly = np.asarray(polygon, dtype=np.float64).reshape(-1, 2)
+    lo, hi = poly.min(axis=0), poly.max(axis=0)
+    gx, gy = np.meshgrid(*(np.arange(a + cell_m / 2, b, cell_m) for a, b in zip(lo, hi)))
+    xy = np.column_stack([gx.ravel(), gy.ravel()])
+    return xy[point_in_polygon(xy, polygon)]

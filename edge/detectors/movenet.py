@@ -57,7 +57,6 @@ PERSON_INPUT_PX: Final[tuple[float, float]] = (32.0, 256.0)
 # What short_side_for chooses from: never below the default (a smaller input is faster, but its
 # keypoints are coarser, and that cost is not measured); 480 runs at 7 fps on one core.
 SITE_SHORT_SIDES: Final[range] = range(DEFAULT_SHORT_SIDE, 480 + 1, 32)
-_PERSON_M: Final[float] = 1.7  # a standing adult, head to feet
 _CELL_M: Final[float] = 0.1
 _SHARE_SLACK: Final[float] = 0.02  # a smaller input within this share of the best is preferred: faster
 
@@ -91,18 +90,14 @@ def short_side_for(cam: Camera, floor: Sequence[Sequence[float]]) -> SizeChoice 
         The choice, or None when the camera sees none of the floor.
     """
     from superbody.edge.camera import project
-    from superbody.edge.floor import point_in_polygon, seen_by
+    from superbody.edge.floor import PERSON_HEIGHT_M, floor_points, seen_by
 
-    poly = np.asarray(floor, dtype=np.float64).reshape(-1, 2)
-    lo, hi = poly.min(axis=0), poly.max(axis=0)
-    gx, gy = (np.arange(a + _CELL_M / 2, b, _CELL_M) for a, b in zip(lo, hi))
-    xy = np.stack(np.meshgrid(gx, gy), axis=-1).reshape(-1, 2)
-    xy = xy[point_in_polygon(xy, floor)]
+    xy = floor_points(floor, _CELL_M)
     xy = xy[seen_by(cam, xy)]
     if len(xy) == 0:
         return None
     feet, z_feet = project(np.column_stack([xy, np.zeros(len(xy))]), cam)
-    head, z_head = project(np.column_stack([xy, np.full(len(xy), _PERSON_M)]), cam)
+    head, z_head = project(np.column_stack([xy, np.full(len(xy), PERSON_HEIGHT_M)]), cam)
     # The visible part of the person, head to feet, rows clipped to the image; a point behind the
     # camera's plane (depth <= 0) is off the image's far edge along its line of sight.
     v_feet = np.where(z_feet > 0, feet[:, 1], cam.height)

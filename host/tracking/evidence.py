@@ -127,6 +127,8 @@ def one_body(views: dict[str, StampedView], near_xy: NDArray | None, sigmas: flo
     with np.errstate(invalid="ignore"):
         gap = np.linalg.norm(xy[:, None] - xy[None], axis=2)  # (V, V), NaN without a ground point
         agree = ~(gap > sigmas * np.sqrt(var[:, None] + var[None]))  # NaN compares False: agrees
+    if agree.all():  # the usual case, every host step: nothing more to compute
+        return cams
     keep = np.ones(len(cams), bool)
     # Drop the view that disagrees with most of the others until the rest all agree; ties: the
     # one farthest from the track, then the one with fewest joints.

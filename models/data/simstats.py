@@ -104,8 +104,8 @@ def view_buckets(samples: list[dict], truths: list, site: Site) -> dict[str, dic
     return out
 
 
-_TORSO = (body.LEFT_SHOULDER, body.RIGHT_SHOULDER, body.LEFT_HIP, body.RIGHT_HIP)
-_TORSO_MIRRORED = (body.RIGHT_SHOULDER, body.LEFT_SHOULDER, body.RIGHT_HIP, body.LEFT_HIP)
+_TORSO = [body.LEFT_SHOULDER, body.RIGHT_SHOULDER, body.LEFT_HIP, body.RIGHT_HIP]
+_TORSO_SWAPPED = [_TORSO.index(body.MIRROR[j]) for j in _TORSO]  # each torso joint's partner, as a row of _TORSO
 
 
 def lr_disagreement(samples: list[dict], site: Site) -> tuple[int, int]:
@@ -134,15 +134,11 @@ def lr_disagreement(samples: list[dict], site: Site) -> tuple[int, int]:
 
     bad = total = 0
     for s in samples:
-        rays = []
-        for cam_id, kp in s.items():
-            if not np.isnan(kp[list(_TORSO), 0]).any():
-                cam = site.camera(cam_id)
-                o, d = pixel_to_ray(kp[list(_TORSO), :2].astype(np.float64), cam)
-                rays.append((o, d, pixel_to_ray(kp[list(_TORSO_MIRRORED), :2].astype(np.float64), cam)[1]))
-        for (oa, da, _), (ob, db, db_swapped) in combinations(rays, 2):
+        rays = [pixel_to_ray(kp[_TORSO, :2].astype(np.float64), site.camera(cam_id))
+                for cam_id, kp in s.items() if not np.isnan(kp[_TORSO, 0]).any()]  # (origin, (4, 3) directions) per view
+        for (oa, da), (ob, db) in combinations(rays, 2):
             total += 1
-            bad += gap(oa, da, ob, db_swapped) < 0.5 * gap(oa, da, ob, db)
+            bad += gap(oa, da, ob, db[_TORSO_SWAPPED]) < 0.5 * gap(oa, da, ob, db)
     return bad, total
 
 
