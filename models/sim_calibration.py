@@ -13,7 +13,10 @@ Every constant then comes from simulation and physics, none from a recording.
 
 Simulation flatters geometry (its cameras are calibrated exactly and its bodies match the
 analytic estimator's model), so the fit leans on geometry wherever geometry is good, and on the
-network where views are poor (one camera, few joints): what a new site needs from it. The fit
+network where views are poor (one camera, few joints): what a new site needs from it. And the
+network earns trust on an axis of a camera count only where, alone, it beats geometry alone
+(``fit_trust``'s ``must_win_alone``): a gain from averaging two estimates of equal quality rests
+on the simulation's independent errors and exact sigmas, which a real site does not share. The fit
 is also scored on the simulated samples, each of five floor regions with the calibration fitted
 on the others (``leave_one_fold_out``).
 """
@@ -82,8 +85,8 @@ def calibrate_on_simulation(site: Site, models: Sequence[Path], samples: int = D
             raise ModelMismatchError(f"{path}: the hybrid needs a model with a pose_std output (retrain it)")
         net.std_scale = np.ones((3, 3))  # the network's own sigmas: the scale is what is fitted
         pred, std = net.estimate_with_std(views)
-        scale, cal = hybrid_fit.fit_calibration(pred, std, analytic, pair, truth, cams, source=source)
-        lofo = hybrid_fit.leave_one_fold_out(pred, std, analytic, pair, truth, cams, fold, site)[0]
+        scale, cal = hybrid_fit.fit_calibration(pred, std, analytic, pair, truth, cams, source=source, must_win_alone=True)
+        lofo = hybrid_fit.leave_one_fold_out(pred, std, analytic, pair, truth, cams, fold, site, must_win_alone=True)[0]
         reports = {name: summarise(p, truth, cams, 0.0) for name, p in (("hybrid (held-out regions)", lofo), ("network", pred),
                                                                        ("analytic", analytic))}
         if write:

@@ -180,6 +180,27 @@ def test_trust_needs_a_gain_beyond_the_noise_on_every_axis():
     assert min(cal.net_trust[2]) >= 1.0
 
 
+def test_on_simulation_the_network_must_win_alone_to_be_trusted():
+    """Three cameras: network and geometry of equal quality with independent errors, so fusing
+    wins by far beyond the noise and the plain fit trusts the network. Fitted on simulation
+    (``must_win_alone``) that axis goes to geometry; one camera, where the network alone is
+    better, keeps its trust."""
+    rng = np.random.default_rng(5)
+    n = 2000
+    cams = np.repeat([1, 3], n // 2)
+    truth = np.column_stack([rng.uniform(-1, 1, (n, 2)), rng.uniform(-3, 3, n)])
+    geo = truth + rng.normal(0, 1, (n, 3)) * np.where(cams[:, None] == 1, [0.4, 0.4, 0.6], [0.05, 0.05, 0.1])
+    net = truth + rng.normal(0, 1, (n, 3)) * np.where(cams[:, None] == 1, [0.1, 0.1, 0.1], [0.055, 0.055, 0.11])
+    net_std = np.where(cams[:, None] == 1, [0.1, 0.1, 0.1], [0.055, 0.055, 0.11])
+    pair = np.ones(n, bool)
+    geo_cal = fit_analytic(geo, pair, truth, cams, debias=(False, False, False))
+    plain = fit_trust(net, net_std, geo, pair, truth, cams, geo_cal)
+    sim = fit_trust(net, net_std, geo, pair, truth, cams, geo_cal, must_win_alone=True)
+    assert min(plain.net_trust[2]) > 0  # averaging two equal estimates pays on these samples
+    assert sim.net_trust[2] == (0.0, 0.0, 0.0)
+    assert sim.net_trust[0] == plain.net_trust[0] and min(sim.net_trust[0]) > 0
+
+
 def test_hybrid_beats_both_when_errors_are_independent():
     """Two unbiased estimates with independent errors: the fused one is better than either."""
     site = load_site(WTF_SITE)
