@@ -142,17 +142,24 @@ def fit_analytic(analytic: NDArray, pair: NDArray, truth: NDArray, cameras: NDAr
     bias = _median_bias(err, cams, debias)
     err = err - bias[cams - 1]
     err[:, 2] = wrap_angle(err[:, 2])
-    rows = []
+    # Yaw sigmas from the samples with a pair, position sigmas from all samples of a count (the
+    # pair only matters for yaw); NaN where a count has fewer than 5.
+    rows = np.full((3, 3), np.nan)
     for k in (1, 2, 3):
         m = ok & (cams == k)
-        rows.append(robust_sigma(err[m & pair]) if (m & pair).sum() >= 5 else robust_sigma(err[ok & pair]))
+        if (m & pair).sum() >= 5:
+            rows[k - 1, 2] = robust_sigma(err[m & pair])[2]
+        if m.sum() >= 5:
+            rows[k - 1, :2] = robust_sigma(err[m])[:2]
+    # A count with too few samples takes the largest sigma of the counts that have them, per
+    # axis: never surer than the data showed (a simulated five-camera room has a handful of
+    # one-camera people, and all samples' sigma put one camera at 4 mm).
+    everyone = robust_sigma(err[ok & pair]) if (ok & pair).sum() >= 5 else np.full(3, np.nan)
+    for axis in range(3):
+        fitted = rows[:, axis][np.isfinite(rows[:, axis])]
+        rows[~np.isfinite(rows[:, axis]), axis] = fitted.max() if len(fitted) else everyone[axis]
     no_pair = ok & ~np.asarray(pair, bool)
     yaw_no_pair = float(robust_sigma(err[no_pair])[2]) if no_pair.sum() >= 5 else np.pi
-    # Position sigmas from all samples of a count (the pair only matters for yaw).
-    for k in (1, 2, 3):
-        m = ok & (cams == k)
-        if m.sum() >= 5:
-            rows[k - 1][:2] = robust_sigma(err[m])[:2]
     table = cast("tuple[tuple[float, float, float], ...]", tuple(tuple(float(max(v, 1e-3)) for v in r) for r in rows))
     return HybridCalibration(analytic_std=table, analytic_yaw_std_no_pair=float(min(max(yaw_no_pair, 0.05), 99.0)),
                              analytic_bias=cast("tuple[tuple[float, float, float], ...]", tuple(tuple(float(v) for v in b) for b in bias)), source=source)

@@ -31,10 +31,29 @@ import numpy as np
 
 from superbody.edge.site import Site
 
-__all__ = ["DEFAULT_SAMPLES", "DEFAULT_SEED", "calibrate_on_simulation", "format_fits"]
+__all__ = ["DEFAULT_SAMPLES", "DEFAULT_SEED", "calibrate_on_simulation", "geometry_calibration", "format_fits"]
 
 DEFAULT_SAMPLES = 4000
 DEFAULT_SEED = 7_2026  # never a training seed (training uses 0-9 by default)
+
+
+def geometry_calibration(site: Site, samples: int = DEFAULT_SAMPLES, seed: int = DEFAULT_SEED, progress: bool = False):
+    """The geometry's sigmas per camera count on simulated people of the site (the detector as
+    measured), as ``calibrate_on_simulation`` fits them for the hybrid: what
+    ``host.estimation.analytic.AnalyticEstimator`` reports with its poses on a site whose model
+    was calibrated on simulation.
+
+    Returns:
+        ``host.estimation.hybrid.HybridCalibration`` (its ``analytic_std`` and
+        ``analytic_yaw_std_no_pair``; no network trust).
+    """
+    from superbody.models import hybrid_fit
+    from superbody.models.data.simdata import SimDataConfig, generate
+
+    data = generate(site, SimDataConfig(samples=samples, seed=seed, randomise_noise=False), progress=progress)
+    analytic, pair = hybrid_fit.analytic_with_pairs(data, site)
+    return hybrid_fit.fit_analytic(analytic, pair, np.array([s.truth for s in data]), np.array([len(s.views) for s in data]),
+                                   source=f"simulation of site {site.name}: {len(data)} samples, seed {seed}")
 
 
 def calibrate_on_simulation(site: Site, models: Sequence[Path], samples: int = DEFAULT_SAMPLES, seed: int = DEFAULT_SEED,

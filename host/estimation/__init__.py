@@ -16,7 +16,7 @@ from pathlib import Path
 
 from superbody.edge.site import Site
 
-__all__ = ["ESTIMATORS", "default_model", "build_estimator", "no_model_message"]
+__all__ = ["ESTIMATORS", "default_model", "build_estimator", "geometry_sigmas", "no_model_message"]
 
 log = logging.getLogger("superbody.host")
 
@@ -50,7 +50,7 @@ def build_estimator(site: Site, kind: str = "auto", model: str | Path | None = N
     if kind == "analytic":
         from superbody.host.estimation.analytic import AnalyticEstimator
 
-        return AnalyticEstimator(site), "analytic"
+        return AnalyticEstimator(site, geometry_sigmas(site, model)), "analytic"
     if kind not in ESTIMATORS:
         raise ValueError(f"unknown estimator {kind!r}; valid estimators: {', '.join(ESTIMATORS)}")
     path = Path(model) if model else default_model(site)
@@ -78,9 +78,38 @@ def build_estimator(site: Site, kind: str = "auto", model: str | Path | None = N
     return net, f"onnx:{path.name}"
 
 
+def geometry_sigmas(site: Site, model: str | Path | None = None):
+    """The geometry's 1-sigmas per camera count from the hybrid calibration of ``model`` (else of
+    the site's shipped model): fitted on real data, or on simulation of the site (``superbody
+    train --calibrate-sim``). None, with a log line, when there is no such model or it cannot
+    serve the site: the analytic estimator then reports no sigmas and the filter uses its defaults.
+
+    Returns:
+        ``host.estimation.hybrid.HybridCalibration`` or None.
+    """
+    path = Path(model) if model else default_model(site)
+    if path is None or not path.is_file():
+        return None
+    from superbody.host.estimation.estimator import OnnxEstimator
+    from superbody.host.estimation.hybrid import META_HYBRID, HybridCalibration
+
+    try:
+        text = OnnxEstimator(path, site).metadata.get(META_HYBRID)
+        cal = HybridCalibration.from_json(text) if text else None
+    except Exception as e:  # a model for another site, or an unreadable file: geometry needs neither
+        log.warning("geometry alone without sigmas: %s: %s", path.name, " ".join(str(e).split())[:200])
+        return None
+    if cal is None:
+        log.info("geometry alone without sigmas: %s has no %s", path.name, META_HYBRID)
+        return None
+    log.info("geometry sigmas from %s's hybrid calibration (%s)", path.name, cal.source or "no source recorded")
+    return cal
+
+
 def no_model_message(site: Site) -> str:
     """What a host on a site without a model runs, and the commands that give the site one."""
     return (f"site {site.name!r} has no model (no --model, no shipped models/{site.name}.fp32.onnx): running geometry alone "
             f"(--estimator analytic: every pose triangulated from the views; no network). To train one from the site file: "
-            f"superbody train --site SITE.toml --geometry --name {site.name}, then pass --model build/models/{site.name}.fp32.onnx "
+            f"superbody train --site SITE.toml --geometry --calibrate-sim --name {site.name} (simulation only; the hybrid calibrated "
+            f"on simulated people of the site), then pass --model build/models/{site.name}.fp32.onnx "
             f"(docs/deploy.md)")

@@ -180,6 +180,20 @@ def test_trust_needs_a_gain_beyond_the_noise_on_every_axis():
     assert min(cal.net_trust[2]) >= 1.0
 
 
+def test_a_camera_count_without_samples_gets_the_largest_fitted_sigma():
+    """Only two- and three-camera samples: the one-camera row is never surer than the data showed."""
+    rng = np.random.default_rng(6)
+    n = 4000
+    cams = np.repeat([2, 3], n // 2)
+    truth = np.column_stack([rng.uniform(-1, 1, (n, 2)), rng.uniform(-3, 3, n)])
+    geo = truth + rng.normal(0, 1, (n, 3)) * np.where(cams[:, None] == 2, [0.08, 0.05, 0.2], [0.02, 0.06, 0.1])
+    cal = fit_analytic(geo, np.ones(n, bool), truth, cams, debias=(False, False, False))
+    one, two, three = np.array(cal.analytic_std)
+    np.testing.assert_allclose(two, [0.08, 0.05, 0.2], rtol=0.1)
+    np.testing.assert_allclose(three, [0.02, 0.06, 0.1], rtol=0.1)
+    np.testing.assert_array_equal(one, np.maximum(two, three))
+
+
 def test_on_simulation_the_network_must_win_alone_to_be_trusted():
     """Three cameras: network and geometry of equal quality with independent errors, so fusing
     wins by far beyond the noise and the plain fit trusts the network. Fitted on simulation

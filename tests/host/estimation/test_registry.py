@@ -7,11 +7,13 @@ import logging
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from superbody.edge.site import dump_site, load_site
-from superbody.host.estimation import build_estimator
+from superbody.host.estimation import build_estimator, default_model
 from superbody.host.estimation.analytic import AnalyticEstimator
+from superbody.models.data.simdata import SimDataConfig, generate
 from tests.conftest import ROOT, WTF_SITE, free_port
 
 
@@ -43,3 +45,33 @@ def test_the_host_command_starts_on_a_site_without_a_model(new_site, tmp_path):
                         "--connect", f"tcp/127.0.0.1:{free_port()}"], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr[-2000:]
     assert "has no model" in r.stderr and "running geometry alone" in r.stderr
+
+
+def test_geometry_reports_the_sigmas_of_the_sites_calibration():
+    """``--estimator analytic`` on the apartment: geometry's sigmas per camera count come from the
+    shipped model's hybrid calibration, so the filter weighs each pose by them (issue 28: without
+    sigmas it took every pose as 0.1 m uncertain and made the four-person room worse)."""
+    site = load_site(WTF_SITE)
+    est, name = build_estimator(site, "analytic")
+    assert name == "analytic" and est.sigmas is not None
+    sets = [s.views for s in generate(site, SimDataConfig(samples=60, seed=1))]
+    got = est.estimate_detailed(sets)
+    _, pair = est.estimate_with_pairs(sets)
+    cams = np.array([len(v) for v in sets])
+    np.testing.assert_array_equal(got.std, est.sigmas.analytic_sigmas(cams, pair))
+    assert np.isfinite(got.std).all() and got.source == ("analytic",) * len(sets)
+    assert len(set(cams.tolist())) > 1 and len({tuple(r) for r in got.std.tolist()}) > 1  # one row per camera count
+
+
+def test_geometry_without_a_model_reports_no_sigmas(new_site):
+    est, _ = build_estimator(new_site, "analytic")
+    assert est.sigmas is None
+
+
+def test_a_model_for_another_site_gives_geometry_no_sigmas_and_a_warning(new_site, caplog):
+    """The model is only read for its calibration: one that cannot serve the site is no reason to refuse geometry."""
+    other = dataclasses.replace(new_site, cameras=new_site.cameras[:2])
+    with caplog.at_level(logging.WARNING, logger="superbody.host"):
+        est, _ = build_estimator(other, "analytic", default_model(load_site(WTF_SITE)))
+    assert est.sigmas is None
+    assert any("without sigmas" in r.getMessage() for r in caplog.records)
