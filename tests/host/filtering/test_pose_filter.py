@@ -112,7 +112,8 @@ def test_disabled_passes_measurements_through_with_finite_difference_rates():
     assert (out.x, out.y) == (1.5, 1.0) and out.yaw == pytest.approx(-170 * DEG)
     assert (out.vx, out.vy) == pytest.approx((1.0, -2.0))
     assert out.yaw_rate == pytest.approx(40 * DEG)  # +20 deg in 0.5 s, across pi
-    assert np.allclose(out.cov, np.diag([0.1**2, 0.1**2, (10 * DEG) ** 2]))
+    c = FilterConfig()
+    assert np.allclose(out.cov, np.diag([c.meas_std_xy_m**2, c.meas_std_xy_m**2, c.meas_std_yaw_rad**2]))  # the default sigmas
     assert f.predict_to(S).x == 1.5  # held, not extrapolated
 
 
