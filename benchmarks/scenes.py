@@ -24,7 +24,10 @@ changes to what the cameras report (``SCENES``):
 - i ``phantom``: one camera's detector reports a static person-shaped false positive (a coat
   on a stand) in 80% of its frames; the other cameras, which see that spot, report nothing;
 - j ``everything``: the crowd under 6 cameras mounted at 1 m, identical clothing, spurious
-  false positives (0.3) and a phantom in a corner of the crowd's floor.
+  false positives (0.3) and a phantom in a corner of the crowd's floor;
+- k ``four-people``: like the real recording held out for issue 28: 5 cameras around a
+  2.3 x 2 m area, alternately 1.0 and 2.2 m up, 4 people, no colour, and cameras that are not
+  where the site file says (0.5 deg, 2 cm: ``Scene.calibration_error``).
 
 Every camera runs at 15 fps, frames staggered within the frame period, through the host's pure
 core in-process (``host.aggregator.Aggregator``: decode, tracker, set S, estimator, filter), one
@@ -51,7 +54,11 @@ matched to a true person who does not count is neither a hit nor a false positiv
 - MOTA = 1 - (misses + false positives + identity switches) / countable person-steps;
 - position (mm) and yaw (deg) errors of the hits: median and p90.
 
-Estimators: ``analytic`` (geometry), ``rays`` (the site-independent model
+Estimators: ``analytic`` (geometry; with the sigmas of the site's shipped model's hybrid
+calibration where it has one, else none, so the filter uses its defaults), ``geo-sim`` (geometry
+with its sigmas fitted on simulation of the site, ``models.sim_calibration.geometry_calibration``:
+what a new site's no-ground-truth journey gives the host wherever its hybrid trusts the network
+on no axis, as with three or more cameras), ``rays`` (the site-independent model
 ``models/site-independent.fp32.onnx``; ``views>max`` is the share of its estimates whose set S
 had more views than its slots: it keeps the views with most joints and says so only in a log
 line at start-up), ``site`` (the site's shipped model, apartment only).
@@ -95,6 +102,7 @@ from superbody.edge.sim import Appearance, NoiseModel, PersonState, SimCamera, W
 from superbody.edge.site import Site, load_site
 from superbody.host.aggregator import Aggregator, HostConfig
 from superbody.host.estimation import build_estimator, default_model
+from superbody.host.estimation.analytic import AnalyticEstimator
 from superbody.host.estimation.estimator import Estimates, estimate_detailed
 from superbody.models.evaluation.temporal import SIGNATURE  # one flat histogram: identical clothing on everyone
 
@@ -104,7 +112,8 @@ FPS: Final = 15.0
 T0_NS: Final = 1_700_000_000 * 1_000_000_000  # every scene starts here (the worlds' epoch)
 GATE_M: Final = 0.5  # a published person farther than this from a true person is not them
 SETTLE_S: Final = 0.5  # after the tracker's confirmation time, before a person counts
-ESTIMATOR_NAMES: Final = ("analytic", "rays", "site")
+ESTIMATOR_NAMES: Final = ("analytic", "geo-sim", "rays", "site")
+GEO_SIM_SAMPLES: Final = 1500  # simulated people the "geo-sim" estimator's sigmas are fitted on
 _NOBODY: Final = -1  # a published person beside no true person
 
 
@@ -124,6 +133,9 @@ class Scene:
             ``"none"`` empty histograms (no colour).
         phantom: a static false person (x, y, yaw) reported by the first camera only, or None.
         phantom_rate: the share of that camera's frames that report it.
+        calibration_error: (deg, m): each camera renders the world from a pose off the site
+            file's by a rotation of this many degrees about a random axis and a shift of
+            this 1-sigma per axis (a real board calibration's error); the host keeps the file's.
     """
 
     key: str
@@ -134,6 +146,7 @@ class Scene:
     colour: Literal["own", "same", "none"] = "own"
     phantom: tuple[float, float, float] | None = None
     phantom_rate: float = 0.8
+    calibration_error: tuple[float, float] = (0.0, 0.0)
 
 
 def _camera(cid: str, pos: Sequence[float], target: Sequence[float], width: int = 1280, height: int = 720, f: float = 800.0) -> Camera:
@@ -218,9 +231,19 @@ def scene_everything() -> Scene:
     return Scene("j", "everything", site, 5, noise=NoiseModel(spurious_prob=0.3), colour="same", phantom=(1.55, 3.45, -0.8))
 
 
+def scene_four_person_room() -> Scene:
+    # Like the real four-person recording held out for issue 28: 5 cameras around a 2.3 x 2 m
+    # area, alternately 1.0 and 2.2 m up, 4 people, no colour, and a calibration that is not exact.
+    ring = _wall_ring(5, 4.3, 4.0, 1.0, 1.0)
+    cams = tuple(_camera(c.id, (c.position[0], c.position[1], 1.0 if i % 2 == 0 else 2.2), (2.15, 2.0, 1.0)) for i, c in enumerate(ring))
+    site = Site(name="room5", cameras=cams, floor=_square(0.7, 0.7, 3.6, 3.3))
+    return Scene("k", "four-people", site, 4, colour="none", calibration_error=(0.5, 0.02))
+
+
 SCENES: Final[dict[str, Callable[[], Scene]]] = {
     "a": scene_apartment, "b": scene_six_cameras, "c": scene_low_cameras, "d": scene_crowd, "e": scene_same_colour,
     "f": scene_spurious, "g": scene_edges, "h": scene_no_colour, "i": scene_phantom, "j": scene_everything,
+    "k": scene_four_person_room,
 }
 
 # A coat on a stand: grey, person-sized.
@@ -268,9 +291,29 @@ def _phantom_view(scene: Scene, cam: SimCamera, frame: int, seed: int) -> Person
     return views[0][1] if views else None
 
 
+def miscalibrated(site: Site, degrees: float, metres: float, seed: int) -> Site:
+    """The site with each camera turned by ``degrees`` about a random axis and moved by a
+    Gaussian shift of ``metres`` per axis (seeded): where the cameras really are when the site
+    file's calibration is off by that much."""
+    if degrees == 0 and metres == 0:
+        return site
+    rng = np.random.default_rng([seed, 0xCA1])
+    cams = []
+    for c in site.cameras:
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+        a = math.radians(degrees)
+        R = np.asarray(c.rotation) @ (np.eye(3) + math.sin(a) * K + (1 - math.cos(a)) * K @ K)  # Rodrigues
+        pos = np.asarray(c.position) + rng.normal(0.0, metres, 3)
+        cams.append(dataclasses.replace(c, rotation=tuple(tuple(float(v) for v in r) for r in R), position=tuple(float(v) for v in pos)))
+    return dataclasses.replace(site, cameras=tuple(cams))
+
+
 def simulate(scene: Scene, seconds: float, seed: int, min_joints: int = 3, progress: bool = False) -> Recording:
-    """Every camera's frames for ``seconds`` of the scene, encoded, with the truth."""
-    site = scene.site
+    """Every camera's frames for ``seconds`` of the scene, encoded, with the truth; the cameras
+    render from where they really are (``Scene.calibration_error``)."""
+    site = miscalibrated(scene.site, *scene.calibration_error, seed)
     world = World(site, scene.people, seed=seed, period_s=max(60.0, seconds + 10.0), epoch_s=T0_NS / 1e9)
     # The cameras render the world's states at each capture time; the truth is those same
     # states: remembered as they are computed, not computed twice.
@@ -490,6 +533,10 @@ def estimators_for(site: Site, names: Sequence[str]) -> dict[str, tuple[object, 
     for name in names:
         if name == "analytic":
             out[name] = build_estimator(site, "analytic")
+        elif name == "geo-sim":
+            from superbody.models.sim_calibration import geometry_calibration
+
+            out[name] = (AnalyticEstimator(site, geometry_calibration(site, samples=GEO_SIM_SAMPLES)), "analytic")
         elif name == "rays":
             path = model_path("site-independent.fp32.onnx")
             if path is not None:
