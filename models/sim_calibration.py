@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from superbody.edge.site import Site
+from superbody.host.estimation.hybrid import HybridCalibration
 
 __all__ = ["DEFAULT_SAMPLES", "DEFAULT_SEED", "calibrate_on_simulation", "geometry_calibration", "format_fits"]
 
@@ -37,15 +38,14 @@ DEFAULT_SAMPLES = 4000
 DEFAULT_SEED = 7_2026  # never a training seed (training uses 0-9 by default)
 
 
-def geometry_calibration(site: Site, samples: int = DEFAULT_SAMPLES, seed: int = DEFAULT_SEED, progress: bool = False):
+def geometry_calibration(site: Site, samples: int = DEFAULT_SAMPLES, seed: int = DEFAULT_SEED, progress: bool = False) -> HybridCalibration:
     """The geometry's sigmas per camera count on simulated people of the site (the detector as
     measured), as ``calibrate_on_simulation`` fits them for the hybrid: what
     ``host.estimation.analytic.AnalyticEstimator`` reports with its poses on a site whose model
     was calibrated on simulation.
 
     Returns:
-        ``host.estimation.hybrid.HybridCalibration`` (its ``analytic_std`` and
-        ``analytic_yaw_std_no_pair``; no network trust).
+        The calibration's ``analytic_std`` and ``analytic_yaw_std_no_pair``; no network trust.
     """
     from superbody.models import hybrid_fit
     from superbody.models.data.simdata import SimDataConfig, generate

@@ -13,8 +13,12 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from superbody.edge.site import Site
+
+if TYPE_CHECKING:
+    from superbody.host.estimation.hybrid import HybridCalibration
 
 __all__ = ["ESTIMATORS", "default_model", "build_estimator", "geometry_sigmas", "no_model_message"]
 
@@ -78,14 +82,11 @@ def build_estimator(site: Site, kind: str = "auto", model: str | Path | None = N
     return net, f"onnx:{path.name}"
 
 
-def geometry_sigmas(site: Site, model: str | Path | None = None):
+def geometry_sigmas(site: Site, model: str | Path | None = None) -> HybridCalibration | None:
     """The geometry's 1-sigmas per camera count from the hybrid calibration of ``model`` (else of
     the site's shipped model): fitted on real data, or on simulation of the site (``superbody
     train --calibrate-sim``). None, with a log line, when there is no such model or it cannot
     serve the site: the analytic estimator then reports no sigmas and the filter uses its defaults.
-
-    Returns:
-        ``host.estimation.hybrid.HybridCalibration`` or None.
     """
     path = Path(model) if model else default_model(site)
     if path is None or not path.is_file():

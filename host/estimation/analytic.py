@@ -104,8 +104,6 @@ class GeometrySigmas(Protocol):
     """Where the geometry's 1-sigmas come from: ``host.estimation.hybrid.HybridCalibration``
     (measured per camera count on real data, or on simulation of the site)."""
 
-    source: str
-
     def analytic_sigmas(self, cameras: NDArray, pair: NDArray) -> NDArray[np.float64]:
         """(B, 3) 1-sigma (m, m, rad) for camera counts (B,) and shoulder-or-hip-pair flags (B,)."""
         ...
@@ -118,8 +116,8 @@ class AnalyticEstimator:
         site: the site (camera models).
         sigmas: the geometry's measured 1-sigmas, reported with each pose
             (``estimate_detailed``) so that the temporal filter weighs a pose as it deserves;
-            None: no sigmas (the filter's defaults, 0.1 m and 10 deg, were 3-25 times the
-            geometry's errors with three or more cameras in simulation).
+            None: no sigmas (the filter then uses its defaults, ``FilterConfig.meas_std_xy_m``
+            and ``meas_std_yaw_rad``, for every pose).
     """
 
     def __init__(self, site: Site, sigmas: GeometrySigmas | None = None):
