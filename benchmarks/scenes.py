@@ -87,6 +87,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Final, Literal
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
@@ -301,10 +302,7 @@ def miscalibrated(site: Site, degrees: float, metres: float, seed: int) -> Site:
     cams = []
     for c in site.cameras:
         axis = rng.normal(size=3)
-        axis /= np.linalg.norm(axis)
-        K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
-        a = math.radians(degrees)
-        R = np.asarray(c.rotation) @ (np.eye(3) + math.sin(a) * K + (1 - math.cos(a)) * K @ K)  # Rodrigues
+        R = np.asarray(c.rotation) @ cv2.Rodrigues(axis / np.linalg.norm(axis) * math.radians(degrees))[0]
         pos = np.asarray(c.position) + rng.normal(0.0, metres, 3)
         cams.append(dataclasses.replace(c, rotation=tuple(tuple(float(v) for v in r) for r in R), position=tuple(float(v) for v in pos)))
     return dataclasses.replace(site, cameras=tuple(cams))

@@ -25,17 +25,44 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
+from numpy.typing import NDArray
 
 from superbody.edge.site import Site
 from superbody.host.estimation.hybrid import HybridCalibration
+from superbody.models.data.samples import Sample
 
 __all__ = ["DEFAULT_SAMPLES", "DEFAULT_SEED", "calibrate_on_simulation", "geometry_calibration", "format_fits"]
 
 DEFAULT_SAMPLES = 4000
 DEFAULT_SEED = 7_2026  # never a training seed (training uses 0-9 by default)
+
+
+class _HeldOut(NamedTuple):
+    """Simulated people of a site with geometry run on them: what both fits score against."""
+
+    data: list[Sample]
+    truth: NDArray[np.float64]  # (N, 3)
+    cams: NDArray[np.int64]  # (N,) views per person
+    analytic: NDArray[np.float64]  # (N, 3)
+    pair: NDArray[np.bool_]  # (N,)
+    source: str
+
+
+def _held_out(site: Site, samples: int, seed: int, progress: bool) -> _HeldOut:
+    """People in the site's own cameras, the detector as measured, not jittered: training widens
+    the noise for robustness, but the fit must see the errors the site's detector makes (with
+    training's swap rates, up to 6% of views, geometry's 3-camera yaw failed so often that the
+    fit trusted the network there, 7.6 deg on dev.json against geometry's 5.8)."""
+    from superbody.models import hybrid_fit
+    from superbody.models.data.simdata import SimDataConfig, generate
+
+    data = generate(site, SimDataConfig(samples=samples, seed=seed, randomise_noise=False), progress=progress)
+    analytic, pair = hybrid_fit.analytic_with_pairs(data, site)
+    return _HeldOut(data, np.array([s.truth for s in data]), np.array([len(s.views) for s in data], dtype=np.int64), analytic, pair,
+                    f"simulation of site {site.name}: {len(data)} samples, seed {seed}")
 
 
 def geometry_calibration(site: Site, samples: int = DEFAULT_SAMPLES, seed: int = DEFAULT_SEED, progress: bool = False) -> HybridCalibration:
@@ -48,12 +75,9 @@ def geometry_calibration(site: Site, samples: int = DEFAULT_SAMPLES, seed: int =
         The calibration's ``analytic_std`` and ``analytic_yaw_std_no_pair``; no network trust.
     """
     from superbody.models import hybrid_fit
-    from superbody.models.data.simdata import SimDataConfig, generate
 
-    data = generate(site, SimDataConfig(samples=samples, seed=seed, randomise_noise=False), progress=progress)
-    analytic, pair = hybrid_fit.analytic_with_pairs(data, site)
-    return hybrid_fit.fit_analytic(analytic, pair, np.array([s.truth for s in data]), np.array([len(s.views) for s in data]),
-                                   source=f"simulation of site {site.name}: {len(data)} samples, seed {seed}")
+    h = _held_out(site, samples, seed, progress)
+    return hybrid_fit.fit_analytic(h.analytic, h.pair, h.truth, h.cams, source=h.source)
 
 
 def calibrate_on_simulation(site: Site, models: Sequence[Path], samples: int = DEFAULT_SAMPLES, seed: int = DEFAULT_SEED,
@@ -80,23 +104,14 @@ def calibrate_on_simulation(site: Site, models: Sequence[Path], samples: int = D
     """
     from superbody.host.estimation.estimator import ModelMismatchError, OnnxEstimator
     from superbody.models import hybrid_fit
-    from superbody.models.data.simdata import SimDataConfig, generate
     from superbody.models.evaluation.crossval import spatial_folds
     from superbody.models.evaluation.evaluate import summarise
 
-    # The detector as measured, not jittered: training widens the noise for robustness, but the
-    # fit must see the errors the site's detector makes (with training's swap rates, up to 6% of
-    # views, geometry's 3-camera yaw failed so often that the fit trusted the network there,
-    # 7.6 deg on dev.json against geometry's 5.8).
-    data = generate(site, SimDataConfig(samples=samples, seed=seed, randomise_noise=False), progress=progress)
+    data, truth, cams, analytic, pair, source = _held_out(site, samples, seed, progress)
     views = [s.views for s in data]
-    truth = np.array([s.truth for s in data])
-    cams = np.array([len(v) for v in views])
-    analytic, pair = hybrid_fit.analytic_with_pairs(data, site)
     fold = np.zeros(len(data), np.int64)
     for k, (held, _) in enumerate(spatial_folds(truth[:, :2], 5, seed=seed)):
         fold[held] = k + 1
-    source = f"simulation of site {site.name}: {len(data)} samples, seed {seed}"
     out: dict[str, Any] = {}
     for path in models:
         net = OnnxEstimator(path, site)
