@@ -14,7 +14,7 @@ from scipy.sparse.csgraph import connected_components
 
 from superbody.edge.colour import bhattacharyya_matrix
 
-__all__ = ["Match", "FrameViews", "assign", "median_colour_distance", "duplicate_views", "DUPLICATE_SPREAD"]
+__all__ = ["Match", "FrameViews", "assign", "clearly_best", "median_colour_distance", "duplicate_views", "DUPLICATE_SPREAD"]
 
 # Two skeletons of one frame whose shared joints lie on average within this fraction of the
 # skeleton's height of each other are one detection: people standing side by side are a body
@@ -107,6 +107,21 @@ def _median_over_history(d: NDArray, counts: NDArray) -> NDArray[np.float64]:
     cols = np.arange(m)
     lo, hi = np.maximum(counts - 1, 0) // 2, counts // 2  # (M,) the middle ranks
     return 0.5 * (d[:, cols, lo] + np.where(counts > 0, d[:, cols, np.minimum(hi, q - 1)], np.nan))
+
+
+def clearly_best(colour_d: NDArray, margin: float) -> NDArray[np.bool_]:
+    """(K, M) whether each of M tracks is the one a view's colours clearly point to.
+
+    Clearly: its colour distance (``colour_d``, (K, M), NaN where unknown) is the view's
+    smallest and every other track's is at least ``margin`` larger. Identical clothing points
+    to nobody; a lone track is pointed to whenever its distance is known.
+    """
+    d = np.where(np.isnan(colour_d), np.inf, colour_d)
+    if d.shape[1] < 2:
+        return np.isfinite(d)
+    two = np.partition(d, 1, axis=1)[:, :2]  # (K, 2) the nearest and the next
+    with np.errstate(invalid="ignore"):  # inf - inf: a view without colour points to nobody
+        return np.isfinite(d) & (d <= two[:, :1]) & (two[:, 1:] - two[:, :1] >= margin)
 
 
 def median_colour_distance(hists: NDArray, history: NDArray, counts: NDArray) -> NDArray[np.float64]:

@@ -12,6 +12,10 @@ and a person unseen for 2 s is removed. This one adds:
 - joint assignment: all people of one camera frame go to tracks at once
   (``scipy.optimize.linear_sum_assignment``) on colour plus normalised geometric distance,
   infeasible pairs forbidden, so one greedy choice cannot steal another view's only match;
+- a cue must vouch for a pair (with ``use_geometry``): the view's colours point to that track
+  (``association.clearly_best``), or its ground point is surer than ``gate_m`` and in the gate.
+  Identical clothing points to nobody, and a ground point metres unsure gates in everyone: a
+  detector's random partial views would keep a track alive whose person has left;
 - care in starting people: a view starts a candidate only if it shows enough joints
   (``min_joints_new``), is placed on the floor (a ground point surer than ``gate_m``, 1 sigma)
   and does not stand inside the gate of a track that this frame did not see. Views that fail
@@ -57,12 +61,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from superbody.edge.messages.observation import Observation, PersonView
 from superbody.edge.site import Site
-from superbody.host.tracking.association import FrameViews, Match, _amplitudes, _median_over_history, assign, duplicate_views
+from superbody.host.tracking.association import FrameViews, Match, _amplitudes, _median_over_history, assign, clearly_best, duplicate_views
 from superbody.host.tracking.config import TrackerConfig
 from superbody.host.tracking.evidence import clearly_sees, coincident, one_body, too_close
 from superbody.host.tracking.ground import ground_points
 from superbody.host.tracking.motion import _NS_PER_S, fuse_positions, predict_positions
-from superbody.host.tracking.reid import Lost, remembered_as
+from superbody.host.tracking.reid import REID_MARGIN, Lost, remembered_as
 from superbody.host.tracking.track import _BINS, StampedView, Track
 
 __all__ = ["Tracker", "DROP_REASONS"]
@@ -351,7 +355,7 @@ class Tracker:
             feasible = ~colour_known | (colour_d < cfg.d_max)  # (K, M)
         cost = np.where(colour_known, colour_d / cfg.d_max, _UNKNOWN_COST)
         cost += np.array([_CANDIDATE_COST if tr.state == "candidate" else 0.0 for tr in tracks])[None, :]
-        vouched = colour_known
+        vouched = colour_known & clearly_best(colour_d, REID_MARGIN) if cfg.use_geometry else colour_known
         if cfg.use_geometry:
             has_pos = np.array([tr._kf_t is not None for tr in tracks], dtype=bool)  # (M,)
             pos, pos_std = np.full((m, 2), np.nan), np.full(m, np.nan)
@@ -369,7 +373,7 @@ class Tracker:
                 near = geo_known & (geo_d <= radius)
                 feasible &= ~geo_known | near
                 cost += cfg.geometry_weight * np.where(geo_known, geo_d / radius, _UNKNOWN_COST)
-            vouched = vouched | geo_known
+            vouched = vouched | (geo_known & (sigma < cfg.gate_m)[:, None])
         rows, cols = assign(cost, feasible & vouched)  # at least one cue must vouch for a pair
         return rows, cols, colour_d, geo_d, near
 
@@ -411,8 +415,7 @@ class Tracker:
         self.stats["reidentified"] += 1
 
     def _forget_lost(self, now_ns: int) -> None:
-        for pid in [pid for pid, lost in self._lost.items() if now_ns - lost.last_seen_ns > self._reid_ns]:
-            del self._lost[pid]
+        self._lost = {pid: lost for pid, lost in self._lost.items() if now_ns - lost.last_seen_ns <= self._reid_ns}
 
     def set_position(self, track_id: int, xy: NDArray | tuple[float, float], stamp_ns: int, std_m: float = 0.1) -> bool:
         """Feed back a better position (e.g. the GNN's) for a track, as a measurement of 1-sigma ``std_m``.

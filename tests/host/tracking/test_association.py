@@ -47,3 +47,19 @@ def test_the_skeleton_with_more_joints_is_kept_and_few_shared_joints_prove_nothi
     assert list(dup) == [True, False]
     kp[1, 4:] = np.nan  # now they share only 0 joints: not enough to call them one
     assert not duplicate_views(kp, np.array([9, 4])).any()
+
+
+def test_colours_point_to_a_track_only_when_clearly_nearer_than_every_other():
+    from superbody.host.tracking.association import clearly_best
+
+    d = np.array([
+        [0.10, 0.50, 0.60],  # clearly the first
+        [0.10, 0.15, 0.60],  # the first two alike: neither
+        [0.20, 0.20, 0.20],  # identical clothing: nobody
+        [np.nan, np.nan, np.nan],  # no colour: nobody
+        [np.nan, 0.30, 0.45],  # the second, by 0.15
+    ])
+    assert clearly_best(d, 0.1).tolist() == [
+        [True, False, False], [False, False, False], [False, False, False], [False, False, False], [False, True, False]]
+    assert clearly_best(d[:, :1], 0.1).ravel().tolist() == [True, True, True, False, False]  # a lone track
+    assert clearly_best(np.zeros((0, 2)), 0.1).shape == (0, 2)

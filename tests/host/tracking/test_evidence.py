@@ -192,3 +192,78 @@ def test_set_s_leaves_out_a_view_of_somebody_else(sigmas):
     got = tracker.view_sets(now)[track.id]
     assert sorted(got) == (["c1", "c2"] if sigmas else ["c1", "c2", "c3"])
     assert tracker.stats["views_of_another_body"] == (1 if sigmas else 0)
+
+
+# -- a view that says nothing of who it is keeps nobody alive ------------------------------------
+
+
+def _views_that_say_nothing(cam, rng: np.random.Generator, colour_kind: str, near: tuple[float, float]) -> list:
+    """Two of a detector's random partial detections in one frame of ``cam``, as the real
+    four-person recording and scene j show them: with identical clothing, three head joints (no
+    ground point) in the shared colours; without colour, the nose, wrists and knees of a body
+    standing near ``near`` inside a full box, which the box alone places no surer than 1 m."""
+    from superbody.edge.messages.observation import PersonView, empty_histogram
+    from superbody.host.tracking.ground import ground_points
+    from tests.host.tracking.test_tracker import colour, person_view
+
+    out = []
+    while len(out) < 2:
+        x, y = np.asarray(near) + rng.uniform(-1.5, 1.5, 2)
+        v = person_view(cam, float(x), float(y), float(rng.uniform(-3, 3)), colour(20.0) if colour_kind == "same" else empty_histogram())
+        if v is None:
+            continue
+        keep = [0, 1, 2] if colour_kind == "same" else [0, 9, 10, 13, 14]
+        kp = np.full_like(v.keypoints, np.nan)
+        kp[keep] = v.keypoints[keep]
+        if np.isnan(kp[keep, 0]).any():
+            continue
+        bbox = v.bbox if colour_kind == "none" else np.array([*np.nanmin(kp[:, :2], 0), *np.nanmax(kp[:, :2], 0)], np.float32)
+        _, sigma, _ = ground_points(kp[None], bbox[None], cam)
+        if colour_kind == "none" and not sigma[0] > TrackerConfig().gate_m:
+            continue  # the premise: a box-placed view no surer than the gate
+        out.append(PersonView(kp, bbox, v.histogram))
+    return out
+
+
+@pytest.mark.parametrize("colour_kind", ["same", "none"])
+def test_a_track_whose_person_left_does_not_live_on_in_noise_nor_come_back_on_someone_else(colour_kind):
+    """The real four-person recording: "a track left one person and reappeared on another". Two
+    people dressed alike (or cameras without colour); a leaves at 3 s, c walks in 1 m from where
+    a stood at 5 s; every camera frame also holds two random partial detections. A view keeps a
+    track alive only if a cue vouches for it: colours that point to that track rather than the
+    others, or a ground point surer than the gate. Before that rule identical colours (or a
+    ground point metres uncertain, whose gate took in everyone) vouched for the noise, which
+    kept a's track alive past its 2 s, and c was taken for a."""
+    from superbody.edge.messages.observation import empty_histogram
+    from tests.host.tracking.test_tracker import colour, person_view
+
+    rng = np.random.default_rng(7)
+    tracker = Tracker(SITE)
+    went: dict[str, set[int]] = {"a": set(), "b": set(), "c": set()}
+    a_alive_until = T0
+    for cam, t in schedule(10.0):
+        s = (t - T0) / S
+        people = {"b": (1.2, 0.0)}
+        if s < 3.0:
+            people["a"] = (-1.2, 0.0)
+        if s >= 5.0:
+            people["c"] = (-1.2, 1.0)
+        views, names = [], []
+        for name, (x, y) in people.items():
+            v = person_view(cam, x, y, 0.0, colour(20.0) if colour_kind == "same" else empty_histogram())
+            if v is not None:
+                views.append(v)
+                names.append(name)
+        noise = _views_that_say_nothing(cam, rng, colour_kind, (-1.2, 0.0))
+        obs = Observation(SITE.name, cam.id, t // 1_000_000, t, cam.width, cam.height, tuple(views + noise))
+        for m in tracker.update(obs):
+            if m.track_id is not None and m.view_index < len(names):
+                went[names[m.view_index]].add(m.track_id)
+        tracker.prune(t)
+        (a_id,) = went["a"] or {None}
+        if a_id is not None and any(p.id == a_id for p in tracker.people(t)):
+            a_alive_until = t
+    (a_id,), (b_id,) = went["a"], went["b"]
+    assert (a_alive_until - T0) / S < 3.0 + TrackerConfig().remove_after_s + 0.2  # a's track ended 2 s after a left
+    assert a_id not in went["c"] and b_id not in went["c"]  # c is somebody new
+    assert len(tracker.people(T0 + 10 * S)) == 2  # b and c; the noise made nobody
