@@ -27,7 +27,9 @@ changes to what the cameras report (``SCENES``):
   false positives (0.3) and a phantom in a corner of the crowd's floor;
 - k ``four-people``: like the real recording held out for issue 28: 5 cameras around a
   2.3 x 2 m area, alternately 1.0 and 2.2 m up, 4 people, no colour, and cameras that are not
-  where the site file says (0.5 deg, 2 cm: ``Scene.calibration_error``).
+  where the site file says (0.5 deg, 2 cm: ``Scene.calibration_error``);
+- l ``four-noisy``: k with a real detector's false positives: random partial ones (0.3 per
+  camera frame) and a phantom in a corner of the floor that the first camera reports.
 
 Every camera runs at 15 fps, frames staggered within the frame period, through the host's pure
 core in-process (``host.aggregator.Aggregator``: decode, tracker, set S, estimator, filter), one
@@ -241,10 +243,17 @@ def scene_four_person_room() -> Scene:
     return Scene("k", "four-people", site, 4, colour="none", calibration_error=(0.5, 0.02))
 
 
+def scene_four_people_noisy() -> Scene:
+    # The four-person room with a real detector's false positives: random partial ones (0.3 per
+    # camera frame) and a static phantom in a corner of the floor that the first camera reports.
+    k = scene_four_person_room()
+    return dataclasses.replace(k, key="l", name="four-noisy", noise=NoiseModel(spurious_prob=0.3), phantom=(1.0, 3.0, -0.8))
+
+
 SCENES: Final[dict[str, Callable[[], Scene]]] = {
     "a": scene_apartment, "b": scene_six_cameras, "c": scene_low_cameras, "d": scene_crowd, "e": scene_same_colour,
     "f": scene_spurious, "g": scene_edges, "h": scene_no_colour, "i": scene_phantom, "j": scene_everything,
-    "k": scene_four_person_room,
+    "k": scene_four_person_room, "l": scene_four_people_noisy,
 }
 
 # A coat on a stand: grey, person-sized.

@@ -252,3 +252,12 @@ def test_benchmark_runs_as_processes_and_writes_its_json(tmp_path):
     assert _finite_numbers(doc)
     assert all(est["recall"] > 0.5 for est in doc["scenes"]["a"]["estimators"].values())
     assert "a apartment" in r.stdout and "MOTA" in r.stdout
+
+
+def test_the_four_person_room_with_a_detectors_false_positives(run):
+    """Scene l, the nearest to issue 28's held-out recording: the random partial detections and
+    the phantom are there, and geometry still publishes the four people, one track each."""
+    sc = run("l", "analytic", 10.0)
+    r = sc["estimators"]["analytic"]
+    assert sc["spurious_prob"] > 0.1 and sc["phantom_views"] > 40 and sc["colour"] == "none"
+    assert r["recall"] >= 0.95 and r["id_switches"] == 0 and r["extra_tracks"] == 0 and r["false_positive_share"] <= 0.05
