@@ -65,18 +65,24 @@ class FrameViews(NamedTuple):
     amps: NDArray[np.float64]  # (K, B) their amplitudes (association.py)
 
 
-def assign(cost: NDArray, feasible: NDArray) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+def assign(cost: NDArray, feasible: NDArray, first: NDArray | None = None) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
     """Joint assignment of rows to columns: the most feasible pairs, then the least total cost.
 
     Args:
         cost: (N, M) cost of each pair.
         feasible: (N, M) bool, False for pairs that must not be matched.
+        first: (M,) bool: these columns are assigned first, the others then take the rows left.
 
     Returns:
         ``(rows, cols)``: matched index pairs, each (K,), all feasible.
     """
     cost = np.asarray(cost, dtype=np.float64)
     feasible = np.asarray(feasible, dtype=bool)
+    if first is not None:
+        rows, cols = assign(cost, feasible & first[None, :])
+        left = np.setdiff1d(np.arange(len(cost)), rows)
+        r2, c2 = assign(cost[left], feasible[left] & ~first[None, :])
+        return np.concatenate([rows, left[r2]]).astype(np.intp), np.concatenate([cols, c2]).astype(np.intp)
     if cost.size == 0 or not feasible.any():
         return np.empty(0, dtype=np.intp), np.empty(0, dtype=np.intp)
     # Any forbidden pair costs more than all feasible pairs together, so the solver first

@@ -12,10 +12,10 @@ and a person unseen for 2 s is removed. This one adds:
 - joint assignment: all people of one camera frame go to tracks at once
   (``scipy.optimize.linear_sum_assignment``) on colour plus normalised geometric distance,
   infeasible pairs forbidden, so one greedy choice cannot steal another view's only match;
-- a cue must vouch for a pair (with ``use_geometry``): the view's colours point to that track
-  (``association.clearly_best``), or its ground point is surer than ``gate_m`` and in the gate.
-  Identical clothing points to nobody, and a ground point metres unsure gates in everyone: a
-  detector's random partial views would keep a track alive whose person has left;
+- confirmed people are matched first, candidates then take the views left (else a candidate
+  beside a person got their view by shifting a neighbour's view onto that person's track);
+- a cue must vouch for a pair (with ``use_geometry``): colours that point to that track
+  (``association.clearly_best``) or a ground point surer than ``gate_m`` in the gate;
 - care in starting people: a view starts a candidate only if it shows enough joints
   (``min_joints_new``), is placed on the floor (a ground point surer than ``gate_m``, 1 sigma)
   and does not stand inside the gate of a track that this frame did not see. Views that fail
@@ -374,7 +374,7 @@ class Tracker:
                 feasible &= ~geo_known | near
                 cost += cfg.geometry_weight * np.where(geo_known, geo_d / radius, _UNKNOWN_COST)
             vouched = vouched | (geo_known & (sigma < cfg.gate_m)[:, None])
-        rows, cols = assign(cost, feasible & vouched)  # at least one cue must vouch for a pair
+        rows, cols = assign(cost, feasible & vouched, first=np.array([tr.state == "confirmed" for tr in tracks], dtype=bool))
         return rows, cols, colour_d, geo_d, near
 
     def _evict_candidate(self, t: int) -> bool:

@@ -267,3 +267,33 @@ def test_a_track_whose_person_left_does_not_live_on_in_noise_nor_come_back_on_so
     assert (a_alive_until - T0) / S < 3.0 + TrackerConfig().remove_after_s + 0.2  # a's track ended 2 s after a left
     assert a_id not in went["c"] and b_id not in went["c"]  # c is somebody new
     assert len(tracker.people(T0 + 10 * S)) == 2  # b and c; the noise made nobody
+
+
+def test_a_candidate_does_not_make_a_persons_view_go_to_their_neighbour():
+    """Scene l: a candidate born beside person q, and a false positive beside person p, in one
+    camera frame with both people. Matching the most views at once gave the false positive to p's
+    track, p's view to q's track (1 m away, inside its gate) and q's view to the candidate: q's
+    track then starved and q came back under a new id. Confirmed people are matched first now."""
+    from superbody.edge.messages.observation import empty_histogram
+    from tests.host.tracking.test_tracker import person_view
+
+    tracker = Tracker(SITE)
+    empty = {"p": (0.0, 0.0), "q": (1.0, 0.0)}  # no colour: geometry alone tells them apart
+
+    def obs(cam, t, spots):
+        views = [person_view(cam, x, y, 0.0, empty_histogram()) for x, y in spots.values()]
+        return Observation(SITE.name, cam.id, t // 1_000_000, t, cam.width, cam.height, tuple(v for v in views if v is not None))
+
+    for cam, t in schedule(3.0):
+        tracker.update(obs(cam, t, empty))
+        tracker.prune(t)
+    ids = {tr.id for tr in tracker.people(T0 + 3 * S)}
+    assert len(ids) == 2
+    t = T0 + 3 * S + 10_000_000
+    born = tracker.update(obs(C1, t, {**empty, "r": (1.4, 0.0)}))  # somebody beside q, once
+    assert born[2].status == "created"
+    t += 30_000_000
+    got = tracker.update(obs(C2, t, {**empty, "fp": (-0.45, 0.0)}))  # a false positive beside p
+    p_id, q_id = born[0].track_id, born[1].track_id
+    assert {p_id, q_id} == ids
+    assert got[0].track_id == p_id and got[1].track_id == q_id
