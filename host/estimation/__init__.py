@@ -92,11 +92,11 @@ def geometry_sigmas(site: Site, model: str | Path | None = None) -> HybridCalibr
     if path is None or not path.is_file():
         return None
     from superbody.host.estimation.estimator import OnnxEstimator
-    from superbody.host.estimation.hybrid import META_HYBRID, HybridCalibration
+    from superbody.host.estimation.hybrid import META_HYBRID, calibration_of
 
     try:
-        text = OnnxEstimator(path, site).metadata.get(META_HYBRID)
-        cal = HybridCalibration.from_json(text) if text else None
+        net = OnnxEstimator(path, site)
+        cal = calibration_of(net) if META_HYBRID in net.metadata else None
     except Exception as e:  # a model for another site, or an unreadable file: geometry needs neither
         log.warning("geometry alone without sigmas: %s: %s", path.name, " ".join(str(e).split())[:200])
         return None

@@ -39,7 +39,7 @@ from superbody.edge.site import Site
 from superbody.host.estimation.analytic import AnalyticEstimator
 from superbody.host.estimation.estimator import Estimates, ModelMismatchError, OnnxEstimator
 
-__all__ = ["HybridCalibration", "HybridEstimator", "fuse", "combine", "META_HYBRID", "SOURCES"]
+__all__ = ["HybridCalibration", "HybridEstimator", "calibration_of", "fuse", "combine", "META_HYBRID", "SOURCES"]
 
 META_HYBRID: Final[str] = "hybrid.calibration"
 SOURCES: Final[tuple[str, ...]] = ("hybrid", "onnx", "analytic")
@@ -162,6 +162,21 @@ def fuse(net: NDArray, net_std: NDArray, geo: NDArray, geo_std: NDArray, trust: 
     return np.column_stack([xy, yaw]), np.sqrt(var)
 
 
+def calibration_of(net: OnnxEstimator) -> HybridCalibration:
+    """The hybrid calibration a model carries in its metadata.
+
+    Raises:
+        ModelMismatchError: the model has none, or an invalid one.
+    """
+    text = net.metadata.get(META_HYBRID)
+    if not text:
+        raise ModelMismatchError(f"{net.path}: no {META_HYBRID} metadata (run superbody calibrate hybrid on it)")
+    try:
+        return HybridCalibration.from_json(text)
+    except (ValueError, KeyError, TypeError) as e:
+        raise ModelMismatchError(f"{net.path}: metadata {META_HYBRID} is invalid: {e}") from None
+
+
 class HybridEstimator:
     """The network fused with geometry (module docstring); implements ``Estimator``.
 
@@ -177,13 +192,7 @@ class HybridEstimator:
     def __init__(self, net: OnnxEstimator, site: Site):
         if not net.has_std:
             raise ModelMismatchError(f"{net.path}: the hybrid estimator needs a model with a pose_std output (retrain it)")
-        text = net.metadata.get(META_HYBRID)
-        if not text:
-            raise ModelMismatchError(f"{net.path}: no {META_HYBRID} metadata (run superbody calibrate hybrid on it)")
-        try:
-            self.calibration = HybridCalibration.from_json(text)
-        except (ValueError, KeyError, TypeError) as e:
-            raise ModelMismatchError(f"{net.path}: metadata {META_HYBRID} is invalid: {e}") from None
+        self.calibration = calibration_of(net)
         self.net = net
         self.site = site
         self.analytic = AnalyticEstimator(site)

@@ -79,10 +79,11 @@ def assign(cost: NDArray, feasible: NDArray, first: NDArray | None = None) -> tu
     cost = np.asarray(cost, dtype=np.float64)
     feasible = np.asarray(feasible, dtype=bool)
     if first is not None:
-        rows, cols = assign(cost, feasible & first[None, :])
+        a, b = np.flatnonzero(first), np.flatnonzero(~np.asarray(first, dtype=bool))
+        rows, cols = assign(cost[:, a], feasible[:, a])
         left = np.setdiff1d(np.arange(len(cost)), rows)
-        r2, c2 = assign(cost[left], feasible[left] & ~first[None, :])
-        return np.concatenate([rows, left[r2]]).astype(np.intp), np.concatenate([cols, c2]).astype(np.intp)
+        r2, c2 = assign(cost[np.ix_(left, b)], feasible[np.ix_(left, b)])
+        return np.concatenate([rows, left[r2]]).astype(np.intp), np.concatenate([a[cols], b[c2]]).astype(np.intp)
     if cost.size == 0 or not feasible.any():
         return np.empty(0, dtype=np.intp), np.empty(0, dtype=np.intp)
     # Any forbidden pair costs more than all feasible pairs together, so the solver first

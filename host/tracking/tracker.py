@@ -73,9 +73,6 @@ __all__ = ["Tracker", "DROP_REASONS"]
 
 # A cue we cannot compute (empty histogram, no ground point) costs this much, normalised.
 _UNKNOWN_COST = 0.5
-# Candidates cost a little more than confirmed people, so a duplicate candidate of a person
-# does not steal that person's views when both fit.
-_CANDIDATE_COST = 0.1
 
 
 class _Order(NamedTuple):
@@ -354,8 +351,7 @@ class Tracker:
         with np.errstate(invalid="ignore"):
             feasible = ~colour_known | (colour_d < cfg.d_max)  # (K, M)
         cost = np.where(colour_known, colour_d / cfg.d_max, _UNKNOWN_COST)
-        cost += np.array([_CANDIDATE_COST if tr.state == "candidate" else 0.0 for tr in tracks])[None, :]
-        vouched = colour_known & clearly_best(colour_d, REID_MARGIN) if cfg.use_geometry else colour_known
+        vouched = colour_known
         if cfg.use_geometry:
             has_pos = np.array([tr._kf_t is not None for tr in tracks], dtype=bool)  # (M,)
             pos, pos_std = np.full((m, 2), np.nan), np.full(m, np.nan)
@@ -373,7 +369,7 @@ class Tracker:
                 near = geo_known & (geo_d <= radius)
                 feasible &= ~geo_known | near
                 cost += cfg.geometry_weight * np.where(geo_known, geo_d / radius, _UNKNOWN_COST)
-            vouched = vouched | (geo_known & (sigma < cfg.gate_m)[:, None])
+            vouched = clearly_best(colour_d, REID_MARGIN) | (geo_known & (sigma < cfg.gate_m)[:, None])
         rows, cols = assign(cost, feasible & vouched, first=np.array([tr.state == "confirmed" for tr in tracks], dtype=bool))
         return rows, cols, colour_d, geo_d, near
 
