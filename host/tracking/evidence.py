@@ -23,17 +23,21 @@ keep landing inside a candidate's gate. Two physical facts tell them from people
   wide, so centres closer than 0.3 m are one body; people standing shoulder to shoulder, or
   hugging, stay further apart than that.
 - **A person's views show one body.** Each camera's latest view of a person (set S) was matched
-  to them on its own; in a crowd a camera's view of a neighbour can join a track, and a track
-  built from two people's views stands between them, where it keeps drawing views of both.
-  Before set S is used (``one_body``), every two of its views must put the person at floor
-  points that agree within ``TrackerConfig.same_body_sigmas`` of their combined ground-point
-  sigmas (``host.tracking.ground``); the view that disagrees with most others is left out
-  (ties: the one farthest from the track's position) until the rest agree, and those left out
+  to them on its own; in a crowd a camera's view of a neighbour (or of a coat on a stand) can join
+  a track, and a track built from two bodies' views stands between them, where it keeps drawing
+  views of both. Before set S is used (``one_body``), each of its views must put the person within
+  ``TrackerConfig.same_body_sigmas`` of the point the others agree on. A view's ground point
+  (``host.tracking.ground``) is unsure along its camera's line of sight, where the range comes from
+  a body part's assumed height (0.2-0.3 m from a camera at 1 m), and sure across it, where the
+  bearing comes from pixels (``TrackerConfig.same_body_across_m``): a view of someone 0.35 m to the
+  side is told from a range error. The worst view is left out (ties: the one farthest from the
+  track's position, then the one with fewest joints) until the rest agree, and those left out
   wait for their cameras' next frames.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -45,7 +49,7 @@ from superbody.edge.site import Obstacle, obstacles_hide
 from superbody.host.tracking.motion import _NS_PER_S
 from superbody.host.tracking.track import StampedView, Track
 
-__all__ = ["EDGE_MARGIN", "MERGE_AFTER_S", "TORSO_CENTRE_M", "clearly_sees", "too_close", "coincident", "seen_together", "one_body"]
+__all__ = ["EDGE_MARGIN", "MERGE_AFTER_S", "TORSO_CENTRE_M", "clearly_sees", "too_close", "coincident", "seen_together", "one_body", "set_s_of_one_body"]
 
 TORSO_CENTRE_M = 1.15  # height of a standing adult's torso centre (between hips 0.9 m and shoulders 1.4 m)
 EDGE_MARGIN = 0.1  # fraction of the image's width and height left out on each side
@@ -108,13 +112,21 @@ def seen_together(a: Track, b: Track) -> bool:
     return any(b.views.get(cam) is not None and b.views[cam].stamp_ns == sv.stamp_ns for cam, sv in a.views.items())
 
 
-def one_body(views: dict[str, StampedView], near_xy: NDArray | None, sigmas: float) -> list[str]:
+def one_body(views: dict[str, StampedView], near_xy: NDArray | None, sigmas: float, across_m: float = math.inf) -> list[str]:
     """The cameras whose views of one person agree on where they stand (module docstring).
+
+    A view's ground point is unsure along its camera's line of sight (its ``ground_std_m``: the
+    range comes from a body part's assumed height) and sure across it (``across_m``: the bearing
+    comes from the pixels). Each view is tested against the point the other views agree on (their
+    inverse-covariance-weighted mean): its Mahalanobis distance must be within ``sigmas``. The
+    worst view beyond that is left out, then the test is run again on the rest.
 
     Args:
         views: set S, camera id -> its view with its ground point.
         near_xy: (2,) the track's position, to break ties; None: the views with most joints win.
-        sigmas: two ground points agree when within this many of their combined 1-sigmas.
+        sigmas: how many combined 1-sigmas a view may lie from the others' point.
+        across_m: a ground point's 1-sigma across the line of sight (capped at its own
+            ``ground_std_m``); views without ``camera_xy`` are equally unsure in every direction.
 
     Returns:
         The camera ids kept, in ``views``' order. A view with no ground point agrees with all.
@@ -122,21 +134,55 @@ def one_body(views: dict[str, StampedView], near_xy: NDArray | None, sigmas: flo
     cams = list(views)
     if len(cams) < 2:
         return cams
-    xy = np.array([views[c].ground_xy for c in cams], dtype=np.float64)  # (V, 2)
-    var = np.array([views[c].ground_std_m for c in cams], dtype=np.float64) ** 2  # (V,)
-    with np.errstate(invalid="ignore"):
-        gap = np.linalg.norm(xy[:, None] - xy[None], axis=2)  # (V, V), NaN without a ground point
-        agree = ~(gap > sigmas * np.sqrt(var[:, None] + var[None]))  # NaN compares False: agrees
-    if agree.all():  # the usual case, every host step: nothing more to compute
+    sv = [views[c] for c in cams]
+    xy = np.array([v.ground_xy for v in sv], dtype=np.float64)  # (V, 2)
+    std = np.array([v.ground_std_m for v in sv], dtype=np.float64)  # (V,)
+    placed = np.isfinite(xy).all(axis=1) & (std > 0) & np.isfinite(std)  # (V,)
+    if placed.sum() < 2:
         return cams
-    keep = np.ones(len(cams), bool)
-    # Drop the view that disagrees with most of the others until the rest all agree; ties: the
-    # one farthest from the track, then the one with fewest joints.
-    far = np.linalg.norm(xy - near_xy, axis=1) if near_xy is not None else np.zeros(len(cams))
-    joints = np.array([views[c].view.num_visible for c in cams])
-    while True:
-        against = ((~agree) & keep[None] & keep[:, None]).sum(axis=1)  # (V,) among the views kept
-        if not against.any():
-            return [c for c, k in zip(cams, keep) if k]
-        order = np.lexsort((joints, -np.nan_to_num(far), -against))  # most disagreements first
-        keep[order[0]] = False
+    # Each view's covariance [[a, b], [b, c]]: std^2 along its line of sight u, across^2 across it.
+    u = xy - np.array([v.camera_xy for v in sv], dtype=np.float64)  # (V, 2)
+    norm = np.hypot(u[:, 0], u[:, 1])
+    aimed = norm > 0  # False for NaN: no camera point, unsure alike in every direction
+    u = np.where(aimed[:, None], u / np.where(aimed, norm, 1.0)[:, None], 0.0)
+    across2 = np.where(aimed, np.minimum(across_m, std), std) ** 2
+    extra = std**2 - across2  # along minus across
+    a, b, c = across2 + extra * u[:, 0] ** 2, extra * u[:, 0] * u[:, 1], across2 + extra * u[:, 1] ** 2
+    det = a * c - b * b
+    ia, ib, ic = c / det, -b / det, a / det  # the inverse: each view's information
+    bx, by = ia * xy[:, 0] + ib * xy[:, 1], ib * xy[:, 0] + ic * xy[:, 1]  # information times point
+    keep = placed.copy()
+    far = np.hypot(*(xy - near_xy).T) if near_xy is not None else np.zeros(len(cams))
+    joints = np.array([v.view.num_visible for v in sv])
+    while keep.sum() >= 2:
+        k = np.flatnonzero(keep)
+        # For each kept view, the others' information (all kept, less it), their point and covariance.
+        oa, ob, oc = ia[k].sum() - ia[k], ib[k].sum() - ib[k], ic[k].sum() - ic[k]
+        odet = oa * oc - ob * ob
+        ca, cb, cc = oc / odet, -ob / odet, oa / odet
+        rx, ry = bx[k].sum() - bx[k], by[k].sum() - by[k]
+        gx, gy = xy[k, 0] - (ca * rx + cb * ry), xy[k, 1] - (cb * rx + cc * ry)
+        ma, mb, mc = a[k] + ca, b[k] + cb, c[k] + cc  # the gap's covariance
+        d2 = (mc * gx * gx - 2 * mb * gx * gy + ma * gy * gy) / (ma * mc - mb * mb)  # (K,)
+        if not (d2 > sigmas**2).any():
+            break
+        # The worst goes (two views are equally far from each other; ties: the one farthest from
+        # the track, then the one with fewest joints).
+        order = np.lexsort((joints[k], -np.nan_to_num(far[k]), -np.round(d2, 6)))
+        keep[k[order[0]]] = False
+    return [cam for cam, kept, p in zip(cams, keep, placed, strict=True) if kept or not p]
+
+
+def set_s_of_one_body(tr: Track, fresh: dict[str, StampedView], sigmas: float, across_m: float) -> tuple[list[str], int]:
+    """``one_body`` of a track's fresh views, checked once per set (the track keeps the last one:
+    the host asks every step, and a person's set changes only when a camera sees them again).
+
+    Returns:
+        The cameras kept, and how many views this call newly left out (0 for a set checked before).
+    """
+    key = tuple((cam, sv.stamp_ns) for cam, sv in fresh.items())
+    if tr._body is not None and tr._body[0] == key:
+        return tr._body[1], 0
+    kept = one_body(fresh, tr.position, sigmas, across_m)
+    tr._body = key, kept
+    return kept, len(fresh) - len(kept)

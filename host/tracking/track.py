@@ -19,13 +19,16 @@ _BINS = HIST_BINS[0] * HIST_BINS[1]
 
 
 class StampedView(NamedTuple):
-    """A view, the capture time of its frame (UNIX ns), and where it puts the person on the floor
-    (``host.tracking.ground``: metres, and its 1-sigma; NaN when it gave none)."""
+    """A view, the capture time of its frame (UNIX ns), where it puts the person on the floor
+    (``host.tracking.ground``: metres, and its 1-sigma; NaN when it gave none) and the floor point
+    below its camera (the point is sure across the line between the two: ``evidence.one_body``;
+    NaN: unknown, the sigma then holds in every direction)."""
 
     stamp_ns: int
     view: PersonView
     ground_xy: tuple[float, float] = (math.nan, math.nan)
     ground_std_m: float = math.nan
+    camera_xy: tuple[float, float] = (math.nan, math.nan)
 
 
 @dataclass(eq=False)
@@ -65,6 +68,8 @@ class Track:
     _chances: int = field(default=1, init=False, repr=False)
     _support: int = field(default=1, init=False, repr=False)
     _close_since_ns: int | None = field(default=None, init=False, repr=False)  # confirmed: inside another since
+    # Set S as last checked (evidence.one_body): its (camera, stamp) pairs, and the cameras kept.
+    _body: tuple[tuple[tuple[str, int], ...], list[str]] | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         self._hist = np.zeros((self.history_q, _BINS), dtype=np.float32)

@@ -63,7 +63,7 @@ from superbody.edge.messages.observation import Observation, PersonView
 from superbody.edge.site import Site
 from superbody.host.tracking.association import FrameViews, Match, _amplitudes, _median_over_history, assign, clearly_best, duplicate_views
 from superbody.host.tracking.config import TrackerConfig
-from superbody.host.tracking.evidence import clearly_sees, coincident, one_body, too_close
+from superbody.host.tracking.evidence import clearly_sees, coincident, set_s_of_one_body, too_close
 from superbody.host.tracking.ground import ground_points
 from superbody.host.tracking.motion import _NS_PER_S, fuse_positions, predict_positions
 from superbody.host.tracking.reid import REID_MARGIN, Lost, remembered_as
@@ -389,7 +389,9 @@ class Tracker:
             tr._streak_ns, tr._chances, tr._support = t, 1, 1
         tr.last_seen_ns = max(tr.last_seen_ns, t)
         tr.hits += 1
-        tr.views[camera] = StampedView(t, view, (float(views.ground[r, 0]), float(views.ground[r, 1])), float(views.sigma[r]))
+        below = self._cameras[camera].t
+        tr.views[camera] = StampedView(t, view, (float(views.ground[r, 0]), float(views.ground[r, 1])), float(views.sigma[r]),
+                                       (float(below[0]), float(below[1])))
         if views.has_colour[r]:
             tr._add_histogram(views.hists[r], views.amps[r])
         if tr.state == "candidate" and tr.last_seen_ns - tr._streak_ns >= self._confirm_ns and self._may_confirm(tr):
@@ -488,8 +490,8 @@ class Tracker:
         for tr in self.people(now_ns):
             fresh = {cam: sv for cam, sv in tr.views.items() if now_ns - sv.stamp_ns <= fresh_ns}
             if len(fresh) > 1 and sigmas > 0:
-                kept = one_body(fresh, tr.position, sigmas)
-                self.stats["views_of_another_body"] += len(fresh) - len(kept)
+                kept, left = set_s_of_one_body(tr, fresh, sigmas, self.config.same_body_across_m)
+                self.stats["views_of_another_body"] += left
                 fresh = {cam: fresh[cam] for cam in kept}
             if fresh:
                 out[tr.id] = {cam: sv.view for cam, sv in fresh.items()}
