@@ -32,7 +32,16 @@ from superbody.edge.messages.observation import PersonView
 from superbody.edge.site import Site
 from superbody.host.estimation.estimator import Estimates
 
-__all__ = ["AnalyticEstimator", "GeometrySigmas", "triangulate", "joints_3d", "pair_points"]
+__all__ = ["AnalyticEstimator", "GeometrySigmas", "triangulate", "joints_3d", "pair_points", "YAW_STD_NO_CUE", "NO_CUE", "HEAD", "PAIR"]
+
+# The 1-sigma (rad) of a yaw from nothing: no shoulder or hip pair, no nose with an eye or ear
+# (one side of a person cut off at an image edge, legs alone). The yaw is then 0 by convention and
+# says nothing: inf tells the temporal filter to keep the person's yaw as predicted
+# (``PoseFilter.update``). A finite sigma, however large, would not do: 45 views a second of yaw 0
+# at 3 rad turned a person standing still by 100 deg in 1.5 s.
+YAW_STD_NO_CUE = math.inf
+# What a yaw came from (``AnalyticEstimator.estimate_with_cues``).
+NO_CUE, HEAD, PAIR = 0, 1, 2
 
 _HEIGHTS = np.asarray(body.TYPICAL_HEIGHT_M)
 _PAIRS = ((body.LEFT_SHOULDER, body.RIGHT_SHOULDER), (body.LEFT_HIP, body.RIGHT_HIP))
@@ -125,12 +134,14 @@ class AnalyticEstimator:
         self.sigmas = sigmas
 
     def estimate_detailed(self, view_sets: Sequence[Mapping[str, PersonView]]) -> Estimates:
-        """Poses, their 1-sigmas (NaN without ``sigmas``) and the source "analytic"."""
-        pose, pair = self.estimate_with_pairs(view_sets)
+        """Poses, their 1-sigmas (NaN without ``sigmas``: the filter's defaults) and the source
+        "analytic". A yaw from no cue at all has ``YAW_STD_NO_CUE`` either way."""
+        pose, cue = self.estimate_with_cues(view_sets)
         if self.sigmas is None:
             std = np.full(pose.shape, np.nan)
         else:
-            std = self.sigmas.analytic_sigmas(np.array([len(v) for v in view_sets], dtype=np.int64), pair).reshape(pose.shape)
+            std = self.sigmas.analytic_sigmas(np.array([len(v) for v in view_sets], dtype=np.int64), cue == PAIR).reshape(pose.shape)
+        std[cue == NO_CUE, 2] = YAW_STD_NO_CUE
         return Estimates(pose, std, ("analytic",) * len(pose))
 
     def estimate(self, view_sets: Sequence[Mapping[str, PersonView]]) -> NDArray[np.float64]:
@@ -140,17 +151,22 @@ class AnalyticEstimator:
     def estimate_with_pairs(self, view_sets: Sequence[Mapping[str, PersonView]]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
         """(B, 3) poses, and (B,) whether each yaw came from a shoulder or hip pair (the
         reliable case; otherwise it came from the head, or is 0 for lack of anything)."""
-        out = np.zeros((len(view_sets), 3))
-        pair = np.zeros(len(view_sets), bool)
-        for i, views in enumerate(view_sets):
-            out[i], pair[i] = self._one(views)
-        return out, pair
+        pose, cue = self.estimate_with_cues(view_sets)
+        return pose, cue == PAIR
 
-    def _one(self, views: Mapping[str, PersonView]) -> tuple[NDArray[np.float64], bool]:
+    def estimate_with_cues(self, view_sets: Sequence[Mapping[str, PersonView]]) -> tuple[NDArray[np.float64], NDArray[np.int8]]:
+        """(B, 3) poses, and (B,) what each yaw came from: ``PAIR``, ``HEAD`` or ``NO_CUE``."""
+        out = np.zeros((len(view_sets), 3))
+        cue = np.zeros(len(view_sets), np.int8)
+        for i, views in enumerate(view_sets):
+            out[i], cue[i] = self._one(views)
+        return out, cue
+
+    def _one(self, views: Mapping[str, PersonView]) -> tuple[NDArray[np.float64], int]:
         j = joints_3d(views, self.site)
         seen = ~np.isnan(j[:, 0])
         if not seen.any():
-            return np.array([np.nan, np.nan, 0.0]), False
+            return np.array([np.nan, np.nan, 0.0]), NO_CUE
         torso = [t for t in body.TORSO if seen[t]]
         centre = j[torso, :2].mean(0) if torso else j[seen, :2].mean(0)
         facing = np.zeros(2)
@@ -159,10 +175,11 @@ class AnalyticEstimator:
             if ends is not None:
                 lr = ends[0][:2] - ends[1][:2]
                 facing += np.array([lr[1], -lr[0]])  # the left-to-right vector turned -90 degrees
-        pair = bool(facing.any())
-        if not facing.any() and seen[body.NOSE]:
+        cue = PAIR if facing.any() else NO_CUE
+        if cue == NO_CUE and seen[body.NOSE]:
             head = [h for h in _HEAD if seen[h]]
             if head:
                 facing = j[body.NOSE, :2] - j[head, :2].mean(0)
+                cue = HEAD if facing.any() else NO_CUE
         yaw = math.atan2(facing[1], facing[0]) if facing.any() else 0.0
-        return np.array([centre[0], centre[1], yaw]), pair
+        return np.array([centre[0], centre[1], yaw]), cue

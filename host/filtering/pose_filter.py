@@ -175,9 +175,11 @@ class PoseFilter:
             x, y: measured floor position, metres.
             yaw: measured torso yaw, radians (any range; it is wrapped).
             meas_std: (std_x m, std_y m, std_yaw rad) of this measurement; the config's by default.
+                A yaw std of inf: the measurement has no yaw (the estimator had nothing to see it
+                by), and the filter's yaw goes on as predicted.
 
         Raises:
-            ValueError: a non-finite input or a non-positive std.
+            ValueError: a non-finite input or a non-positive std (inf allowed for the yaw only).
         """
         for name, v in (("x", x), ("y", y), ("yaw", yaw)):
             if not math.isfinite(v):
@@ -187,18 +189,21 @@ class PoseFilter:
             std: tuple[float, ...] = (c.meas_std_xy_m, c.meas_std_xy_m, c.meas_std_yaw_rad)
         else:
             std = tuple(float(s) for s in meas_std)
-            if len(std) != 3 or not all(math.isfinite(s) and s > 0 for s in std):
-                raise ValueError(f"PoseFilter.update: meas_std must be 3 finite positive stds (x m, y m, yaw rad), got {meas_std!r}")
+            if len(std) != 3 or not all(math.isfinite(s) and s > 0 for s in std[:2]) or not std[2] > 0:
+                raise ValueError(f"PoseFilter.update: meas_std must be 3 positive stds (x m, y m, yaw rad; finite, "
+                                 f"but a yaw std may be inf), got {meas_std!r}")
         t_ns = int(t_ns)
         yaw = float(wrap_angle(float(yaw)))
-        R = np.diag(np.square(std))  # (3, 3)
+        no_yaw = math.isinf(std[2])
         if self._t is not None and t_ns < self._t:
             self.ignored += 1
             return self._pose(self._t, self._x, self._P)
+        # Starting (or passing through) without a yaw: the yaw is unknown, pi^2 its variance.
+        R = np.diag(np.square((*std[:2], math.pi if no_yaw else std[2])))  # (3, 3)
         if self._t is None or (t_ns - self._t) * _NS > self.config.reset_after_s:
             return self._start(t_ns, x, y, yaw, R)
         if not self.config.enabled:
-            return self._pass_through(t_ns, x, y, yaw, R)
+            return self._pass_through(t_ns, x, y, float(self._x[2]) if no_yaw else yaw, R)
         return _step([self], np.array([t_ns]), np.array([[x, y, yaw]]), np.array([std]))[0]
 
     def predict_to(self, t_ns: int) -> FilteredPose:
@@ -261,8 +266,10 @@ def update_many(
         filters: B filters (distinct).
         t_ns: (B,) capture times, UNIX nanoseconds.
         pose: (B, 3) measured (x, y, yaw).
-        meas_std: (B, 3) 1-sigma per measurement; a row that is not 3 finite positive numbers
-            (or None for all) means the filter's configured default.
+        meas_std: (B, 3) 1-sigma per measurement; NaN in an axis (or None for all) means the
+            filter's configured default for that axis; a yaw of inf, no yaw (``PoseFilter.update``);
+            a row with any other value that is not a finite positive number, the defaults for
+            the whole row.
 
     Returns:
         The B filtered poses, in order.
@@ -271,8 +278,11 @@ def update_many(
     B = len(filters)
     if len(pose) != B or len(t_ns) != B:
         raise ValueError(f"update_many: {B} filters, {len(t_ns)} stamps and {len(pose)} poses must match")
-    ms = np.full((B, 3), np.nan) if meas_std is None else np.asarray(meas_std, dtype=np.float64).reshape(B, 3)
-    good = cast("NDArray[np.bool_]", (np.isfinite(ms) & (ms > 0)).all(axis=1)).tolist()  # (B,) rows that are a sigma; else the default
+    defaults = np.array([(f.config.meas_std_xy_m, f.config.meas_std_xy_m, f.config.meas_std_yaw_rad) for f in filters]).reshape(B, 3)
+    ms = defaults if meas_std is None else np.asarray(meas_std, dtype=np.float64).reshape(B, 3)
+    ms = np.where(np.isnan(ms), defaults, ms)
+    good = cast("NDArray[np.bool_]", (np.isfinite(ms[:, :2]) & (ms[:, :2] > 0)).all(axis=1) & (ms[:, 2] > 0))  # (B,) rows that are a sigma
+    ms[~good] = defaults[~good]
     finite = cast("NDArray[np.bool_]", np.isfinite(pose).all(axis=1)).tolist()
     out: list[FilteredPose | None] = [None] * B
     batch: list[int] = []
@@ -281,15 +291,10 @@ def update_many(
         if f.config.enabled and finite[i] and f._t is not None and f._t <= t and (t - f._t) * _NS <= f.config.reset_after_s:
             batch.append(i)
         else:
-            out[i] = f.update(t, float(pose[i, 0]), float(pose[i, 1]), float(pose[i, 2]), cast("tuple[float, float, float]", tuple(map(float, ms[i]))) if good[i] else None)
+            out[i] = f.update(t, float(pose[i, 0]), float(pose[i, 1]), float(pose[i, 2]), cast("tuple[float, float, float]", tuple(map(float, ms[i]))))
     if batch:
         fs = [filters[i] for i in batch]
-        std = ms[batch]  # (n, 3)
-        for k, i in enumerate(batch):
-            if not good[i]:
-                c = filters[i].config
-                std[k] = (c.meas_std_xy_m, c.meas_std_xy_m, c.meas_std_yaw_rad)
-        for i, fp in zip(batch, _step(fs, np.array([int(t_ns[i]) for i in batch], dtype=np.int64), pose[batch], std)):
+        for i, fp in zip(batch, _step(fs, np.array([int(t_ns[i]) for i in batch], dtype=np.int64), pose[batch], ms[batch])):
             out[i] = fp
     return out  # type: ignore[return-value]
 
@@ -347,6 +352,10 @@ def _predict_many(filters: Sequence[PoseFilter], t_ns: NDArray) -> tuple[NDArray
     return x[:, :, None], P
 
 
+# A yaw measurement's std (rad) standing for "no yaw": its Kalman gain is below 1e-10.
+_NO_YAW_STD = 1e6
+
+
 def _step(filters: Sequence[PoseFilter], t_ns: NDArray, pose: NDArray, std: NDArray) -> list[FilteredPose]:
     """The plain predict + update of n filters with a state not newer than ``t_ns`` (n,), in one
     batch: measurements ``pose`` (n, 3) of 1-sigma ``std`` (n, 3). Sets and returns their states.
@@ -363,7 +372,8 @@ def _step(filters: Sequence[PoseFilter], t_ns: NDArray, pose: NDArray, std: NDAr
     # innovation stays in (-pi, pi])
     z = np.column_stack([pose[:, 0], pose[:, 1], pos[:, 2] + wrap_angle(wrap_angle(pose[:, 2]) - pos[:, 2])])  # (n, 3)
     gate = np.array([f.config.outlier_sigma for f in filters])[:, None]  # (n, 1)
-    pos, rate, cov = cv_update(pos, rate, cov, z, _huber(np.square(std), z - pos, cov.p00, gate))
+    R = np.square(np.where(np.isinf(std), _NO_YAW_STD, std))  # no yaw: a variance that moves nothing
+    pos, rate, cov = cv_update(pos, rate, cov, z, _huber(R, z - pos, cov.p00, gate))
     pos, rate, cov = _walking_prior(filters, pos, rate, cov, dt)
     pos[:, 2] = wrap_angle(pos[:, 2])
     X, P = _packed(pos, rate, cov)

@@ -110,3 +110,26 @@ def test_dev_json_baseline(dev_json):
     mae = np.abs(est[:, :2] - truth[:, :2]).mean(0)
     yaw = np.degrees(np.abs(wrap_angle(est[:, 2] - truth[:, 2]))).mean()
     assert mae[0] < 0.16 and mae[1] < 0.18 and yaw < 16
+
+
+def test_a_yaw_from_nothing_says_nothing():
+    """One side of a body (no shoulder or hip pair, no nose with an eye or ear: a person cut off
+    at an image edge) gives a yaw of 0 by convention, reported with an infinite sigma; a pair
+    gives its yaw with the filter's default (NaN, no sigmas); the head alone, the same."""
+    from superbody.host.estimation.analytic import HEAD, NO_CUE, PAIR, YAW_STD_NO_CUE
+
+    site = load_site(WTF_SITE)
+    full = _clean_views(site, -0.5, -1.0, 0.3, ("1",))["1"]
+    left_side = [body.INDEX[n] for n in ("left_shoulder", "left_elbow", "left_hip", "left_knee", "left_ankle")]
+    head = [body.NOSE, body.INDEX["left_eye"], body.INDEX["right_eye"], body.LEFT_SHOULDER]
+
+    def only(joints):
+        kp = np.full_like(full.keypoints, np.nan)
+        kp[joints] = full.keypoints[joints]
+        return {"1": dataclasses.replace(full, keypoints=kp)}
+
+    got = AnalyticEstimator(site).estimate_detailed([{"1": full}, only(left_side), only(head)])
+    _, cue = AnalyticEstimator(site).estimate_with_cues([{"1": full}, only(left_side), only(head)])
+    assert cue.tolist() == [PAIR, NO_CUE, HEAD]
+    assert got.pose[1, 2] == 0.0 and got.std[1, 2] == YAW_STD_NO_CUE == math.inf
+    assert np.isnan(got.std[[0, 2]]).all() and np.isnan(got.std[1, :2]).all()

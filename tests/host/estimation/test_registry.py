@@ -12,7 +12,7 @@ import pytest
 
 from superbody.edge.site import dump_site, load_site
 from superbody.host.estimation import build_estimator, default_model
-from superbody.host.estimation.analytic import AnalyticEstimator
+from superbody.host.estimation.analytic import NO_CUE, PAIR, AnalyticEstimator
 from superbody.models.data.simdata import SimDataConfig, generate
 from tests.conftest import ROOT, WTF_SITE, free_port
 
@@ -56,10 +56,12 @@ def test_geometry_reports_the_sigmas_of_the_sites_calibration():
     assert name == "analytic" and est.sigmas is not None
     sets = [s.views for s in generate(site, SimDataConfig(samples=60, seed=1))]
     got = est.estimate_detailed(sets)
-    _, pair = est.estimate_with_pairs(sets)
+    _, cue = est.estimate_with_cues(sets)
     cams = np.array([len(v) for v in sets])
-    np.testing.assert_array_equal(got.std, est.sigmas.analytic_sigmas(cams, pair))
-    assert np.isfinite(got.std).all() and got.source == ("analytic",) * len(sets)
+    want = est.sigmas.analytic_sigmas(cams, cue == PAIR)
+    want[cue == NO_CUE, 2] = np.inf  # a yaw from nothing says nothing, calibrated or not
+    np.testing.assert_array_equal(got.std, want)
+    assert np.isfinite(got.std[cue != NO_CUE]).all() and got.source == ("analytic",) * len(sets)
     assert len(set(cams.tolist())) > 1 and len({tuple(r) for r in got.std.tolist()}) > 1  # one row per camera count
 
 

@@ -328,3 +328,25 @@ def test_one_bad_measurement_does_not_move_a_track_far(outlier_sigma, moved_max_
     for k in range(31, 60):  # but a real move, kept up, is followed within a second or two
         p = f.update(k * S // 15, 2.0, 0.0, 0.0, (0.05, 0.05, 0.1))
     assert p.x > 1.9
+
+
+def test_a_yaw_std_of_inf_is_a_measurement_without_yaw():
+    """An estimator that saw nothing to tell a yaw by reports it with an infinite sigma: the
+    position is updated, the yaw goes on as predicted (a finite sigma, even 3 rad, taken 45 times
+    a second, would turn the person). NaN in a row of ``update_many`` is that axis's default."""
+    from superbody.host.filtering.pose_filter import update_many
+
+    f, g = PoseFilter(), PoseFilter()
+    for k in range(45):  # standing still (walking, the walking direction would pull the yaw)
+        t, yaw, std = k * S // 30, (1.0 if k == 0 else 0.0), (0.05, 0.05, 0.1 if k == 0 else math.inf)
+        f.update(t, 0.0, 0.0, yaw, std)
+        (got,) = update_many([g], [t], np.array([[0.0, 0.0, yaw]]), np.array([std]))
+    assert abs(got.yaw - 1.0) < 1e-6 and got.cov[2, 2] > 0.1**2 and np.allclose(got.cov, f.predict_to(t).cov)
+    a, b = PoseFilter(), PoseFilter()
+    c = FilterConfig()
+    for k in range(5):
+        pa = a.update(k * S // 10, 0.1 * k, 0.0, 0.2 * k, (c.meas_std_xy_m, 0.2, math.inf))
+        (pb,) = update_many([b], [k * S // 10], np.array([[0.1 * k, 0.0, 0.2 * k]]), np.array([[math.nan, 0.2, math.inf]]))
+        assert np.allclose([pa.x, pa.y, pa.yaw], [pb.x, pb.y, pb.yaw]) and np.allclose(pa.cov, pb.cov)
+    with pytest.raises(ValueError, match="meas_std"):
+        PoseFilter().update(0, 0.0, 0.0, 0.0, (math.inf, 0.1, 0.1))
