@@ -354,6 +354,7 @@ def _predict_many(filters: Sequence[PoseFilter], t_ns: NDArray) -> tuple[NDArray
 
 # A yaw measurement's std (rad) standing for "no yaw": its Kalman gain is below 1e-10.
 _NO_YAW_STD = 1e6
+_MAX_YAW_VAR = math.pi**2
 
 
 def _step(filters: Sequence[PoseFilter], t_ns: NDArray, pose: NDArray, std: NDArray) -> list[FilteredPose]:
@@ -376,6 +377,11 @@ def _step(filters: Sequence[PoseFilter], t_ns: NDArray, pose: NDArray, std: NDAr
     pos, rate, cov = cv_update(pos, rate, cov, z, _huber(R, z - pos, cov.p00, gate))
     pos, rate, cov = _walking_prior(filters, pos, rate, cov, dt)
     pos[:, 2] = wrap_angle(pos[:, 2])
+    # Without yaw measurements the yaw's variance would grow without end (past the PoseArray's
+    # limit within two minutes); an angle's is pi^2 at most: the yaw axis's block is scaled down.
+    shrink = np.minimum(1.0, _MAX_YAW_VAR / cov.p00[:, 2])  # (n,)
+    for block in cov:
+        block[:, 2] *= shrink
     X, P = _packed(pos, rate, cov)
     out = []
     for k, f in enumerate(filters):

@@ -350,3 +350,19 @@ def test_a_yaw_std_of_inf_is_a_measurement_without_yaw():
         assert np.allclose([pa.x, pa.y, pa.yaw], [pb.x, pb.y, pb.yaw]) and np.allclose(pa.cov, pb.cov)
     with pytest.raises(ValueError, match="meas_std"):
         PoseFilter().update(0, 0.0, 0.0, 0.0, (math.inf, 0.1, 0.1))
+
+
+def test_a_yaw_unmeasured_for_minutes_keeps_a_variance_a_pose_array_can_carry():
+    """A person seen only from one side for minutes: with no yaw measured its variance grew
+    without end (873,000 rad^2 after 100 s, past the PoseArray's limit of 1e6). An angle's
+    variance is pi^2 at most."""
+    from superbody.host.filtering.pose_filter import update_many
+    from superbody.host.messages.pose_rules import _MAX_COV
+
+    f = [PoseFilter(), PoseFilter()]
+    update_many(f, [0, 0], np.array([[0.0, 0.0, 1.0], [1.0, 0.0, -1.0]]), np.full((2, 3), 0.1))
+    for k in range(1, 1501):  # 150 s at 10 Hz, the second filter's yaw measured throughout
+        got = update_many(f, [k * S // 10] * 2, np.array([[0.0, 0.0, 0.0], [1.0, 0.0, -1.0]]), np.array([[0.05, 0.05, math.inf], [0.05, 0.05, 0.1]]))
+    assert got[0].cov[2, 2] == pytest.approx(math.pi**2) and got[0].cov[2, 2] < _MAX_COV and abs(got[0].yaw - 1.0) < 1e-3
+    assert got[1].cov[2, 2] < 0.1**2  # a measured yaw's variance is not touched
+    assert np.all(np.linalg.eigvalsh(got[0].cov) >= 0)
