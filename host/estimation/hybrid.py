@@ -18,6 +18,12 @@ subtracted from its yaw first). Then:
    geometry), and sigma is that of this mean of two independent estimates ((1/s_net^2 +
    1/s_geo^2)^-1/2 at t = 1): label ``"hybrid"``. Where the geometry found nothing, the network's pose:
    label ``"onnx"``.
+3. **A yaw from nothing.** Where the geometry's yaw came from no cue at all (``analytic.NO_CUE``:
+   one side of a body, cut off at an image edge), the pose's yaw sigma is ``YAW_STD_NO_CUE`` and
+   the filter keeps the person's yaw. The geometry's yaw is then 0 by convention: taken at the
+   calibration's no-pair sigma (1.6 rad for the apartment), it turned a person standing still by
+   141 deg in 1.5 s (``test_views_that_show_no_yaw_keep_the_persons_last_yaw``); and the
+   apartment's network alone, tried there once instead, put them 150-180 deg off.
 
 The fused sigma is what the host's filter uses as the measurement noise.
 """
@@ -36,7 +42,7 @@ from superbody.edge.angles import wrap_angle
 from superbody.edge.floor import point_in_polygon
 from superbody.edge.messages.observation import PersonView
 from superbody.edge.site import Site
-from superbody.host.estimation.analytic import AnalyticEstimator
+from superbody.host.estimation.analytic import NO_CUE, PAIR, YAW_STD_NO_CUE, AnalyticEstimator
 from superbody.host.estimation.estimator import Estimates, ModelMismatchError, OnnxEstimator
 
 __all__ = ["HybridCalibration", "HybridEstimator", "calibration_of", "fuse", "combine", "META_HYBRID", "SOURCES"]
@@ -205,13 +211,15 @@ class HybridEstimator:
         if len(view_sets) == 0:
             return Estimates(np.zeros((0, 3)), np.zeros((0, 3)), ())
         net, net_std = self.net.estimate_with_std(view_sets)
-        geo, pair = self.analytic.estimate_with_pairs(view_sets)
-        pose, std, source = combine(net, net_std, geo, pair, np.array([len(v) for v in view_sets]), self.calibration, self.site)
+        geo, cue = self.analytic.estimate_with_cues(view_sets)
+        pose, std, source = combine(net, net_std, geo, cue == PAIR, np.array([len(v) for v in view_sets]), self.calibration, self.site,
+                                    no_yaw=cue == NO_CUE)
         return Estimates(pose, std, tuple(str(s) for s in source))
 
 
 def combine(
     net: NDArray, net_std: NDArray, geo: NDArray, pair: NDArray, cameras: NDArray, calibration: HybridCalibration, site: Site,
+    no_yaw: NDArray | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.str_]]:
     """The hybrid's decision on arrays: the support gate, then the fusion (module docstring).
 
@@ -219,6 +227,9 @@ def combine(
         net, net_std: (B, 3) the network's poses and calibrated 1-sigmas.
         geo, pair: (B, 3) the analytic poses, (B,) whether each yaw came from a shoulder/hip pair.
         cameras: (B,) how many cameras saw each person.
+        no_yaw: (B,) analytic yaws from nothing (``analytic.NO_CUE``): the pose's yaw sigma is
+            ``YAW_STD_NO_CUE`` there, so the filter keeps the person's yaw. None: none (the
+            calibration's fits, which take the no-pair sigma for them).
 
     Returns:
         (B, 3) poses, (B, 3) 1-sigmas and (B,) sources ("hybrid", "onnx", "analytic").
@@ -232,7 +243,10 @@ def combine(
     outside = ~(_near_floor(net[:, :2], site, m) & np.where(has_geo, _near_floor(np.nan_to_num(geo[:, :2]), site, m), True))
     source = np.where(~has_geo, "onnx", np.where(outside, "analytic", "hybrid"))
     pick = lambda a, b, fused: np.where((source == "onnx")[:, None], a, np.where((source == "analytic")[:, None], b, fused))  # noqa: E731
-    return pick(net, geo, pose), pick(net_std, geo_std, std), source
+    out_std = pick(net_std, geo_std, std)
+    if no_yaw is not None:  # neither yaw is to be trusted there (module docstring); the network's alone stands
+        out_std[np.asarray(no_yaw, bool) & (source != "onnx"), 2] = YAW_STD_NO_CUE
+    return pick(net, geo, pose), out_std, source
 
 
 def _near_floor(xy: NDArray, site: Site, margin: float) -> NDArray[np.bool_]:

@@ -272,15 +272,19 @@ def test_an_out_of_range_rate_is_clamped_and_every_pose_array_publishes(site):
     assert at_limit > 0 and len(arr.people) == 2  # the clamp was needed, and nobody was dropped
 
 
-def test_views_that_show_no_yaw_keep_the_persons_last_yaw(site):
+@pytest.mark.parametrize("kind", ["analytic", "auto"])
+def test_views_that_show_no_yaw_keep_the_persons_last_yaw(site, kind):
     """People cut off at an image edge (scene g): a view of one side of a body (no shoulder or hip
     pair, no nose with an eye or ear) gives the analytic estimator a yaw of 0 by convention. That
-    yaw says nothing and is reported so (``YAW_STD_NO_CUE``): the filter keeps the person's last
-    yaw. Before, the filter took the 0 at its default 4 deg and within a second the person, who
-    stood still facing 2 rad, faced +x (scene g at seed 1: yaw p90 132 -> 52 deg)."""
+    yaw says nothing and is reported so (``YAW_STD_NO_CUE``), by geometry alone and by the
+    apartment's hybrid: the filter keeps the person's last yaw. Before, the filter took the 0 (at
+    its default 4 deg; the hybrid, at the calibration's no-pair sigma, 1.6 rad) and within 1.5 s
+    the person, who stood still facing 2 rad, had turned by 100-141 deg (scene g at seed 1: yaw
+    p90 132 -> 58 deg)."""
     from superbody.edge import body
     from superbody.edge.messages.observation import Observation
     from superbody.edge.sim import NoiseModel, PersonState, render_views, skeleton
+    from superbody.host.estimation import build_estimator
 
     clean = NoiseModel(pixel_noise_px=0.0, joint_rate=(1.0,) * 17, view_quality_std=0.0, view_miss_prob=0.0,
                        truncated_miss_prob=0.0, swap_prob=0.0, spurious_prob=0.0, facing_visibility=None, occluded_keep=1.0)
@@ -288,7 +292,9 @@ def test_views_that_show_no_yaw_keep_the_persons_last_yaw(site):
     state = PersonState(x, y, yaw, skeleton(x, y, yaw, 0.0, 0.0))
     world = World(site, 1, seed=0)
     left_side = [body.INDEX[n] for n in ("left_shoulder", "left_elbow", "left_wrist", "left_hip", "left_knee", "left_ankle")]
-    agg = Aggregator(site, AnalyticEstimator(site), "analytic")
+    est, name = build_estimator(site, kind)
+    assert name.split(":")[0] == ("analytic" if kind == "analytic" else "hybrid")
+    agg = Aggregator(site, est, name)
     yaws = []
     for k in range(int(4.5 * FPS)):
         for i, cam in enumerate(site.camera_ids):
@@ -304,4 +310,4 @@ def test_views_that_show_no_yaw_keep_the_persons_last_yaw(site):
             if k >= 3 * FPS and arr.people:
                 yaws.append(arr.people[0].yaw)
     assert AnalyticEstimator(site).estimate_with_cues([{"1": view}])[1][0] == 0  # the premise: no yaw cue in those views
-    assert len(yaws) > 50 and max(abs(wrap_angle(a - yaw)) for a in yaws) < math.radians(5)
+    assert len(yaws) > 50 and max(abs(wrap_angle(a - yaw)) for a in yaws) < math.radians(8)
