@@ -144,13 +144,14 @@ def one_body(views: dict[str, StampedView], near_xy: NDArray | None, sigmas: flo
     u = xy - np.array([v.camera_xy for v in sv], dtype=np.float64)  # (V, 2)
     norm = np.hypot(u[:, 0], u[:, 1])
     aimed = norm > 0  # False for NaN: no camera point, unsure alike in every direction
-    u = np.where(aimed[:, None], u / np.where(aimed, norm, 1.0)[:, None], 0.0)
-    across2 = np.where(aimed, np.minimum(across_m, std), std) ** 2
-    extra = std**2 - across2  # along minus across
-    a, b, c = across2 + extra * u[:, 0] ** 2, extra * u[:, 0] * u[:, 1], across2 + extra * u[:, 1] ** 2
-    det = a * c - b * b
-    ia, ib, ic = c / det, -b / det, a / det  # the inverse: each view's information
-    bx, by = ia * xy[:, 0] + ib * xy[:, 1], ib * xy[:, 0] + ic * xy[:, 1]  # information times point
+    with np.errstate(all="ignore"):  # rows of views not placed are NaN, and never used
+        u = np.where(aimed[:, None], u / np.where(aimed, norm, 1.0)[:, None], 0.0)
+        across2 = np.where(aimed, np.minimum(across_m, std), std) ** 2
+        extra = std**2 - across2  # along minus across
+        a, b, c = across2 + extra * u[:, 0] ** 2, extra * u[:, 0] * u[:, 1], across2 + extra * u[:, 1] ** 2
+        det = a * c - b * b
+        ia, ib, ic = c / det, -b / det, a / det  # the inverse: each view's information
+        bx, by = ia * xy[:, 0] + ib * xy[:, 1], ib * xy[:, 0] + ic * xy[:, 1]  # information times point
     keep = placed.copy()
     far = np.hypot(*(xy - near_xy).T) if near_xy is not None else np.zeros(len(cams))
     joints = np.array([v.view.num_visible for v in sv])

@@ -326,3 +326,30 @@ def test_a_candidate_does_not_make_a_persons_view_go_to_their_neighbour():
     p_id, q_id = born[0].track_id, born[1].track_id
     assert {p_id, q_id} == ids
     assert got[0].track_id == p_id and got[1].track_id == q_id
+
+
+def test_one_body_keeps_views_without_a_usable_ground_point_and_warns_of_nothing():
+    """A view whose ground point has no usable sigma (0, inf, NaN) says nothing against the others
+    and is kept; the test of the rest runs without numpy warnings. 0.4 m off along the view's
+    line of sight (sigma 0.3 m) is a range error; across it, another body."""
+    import warnings
+
+    from superbody.host.tracking.evidence import one_body
+    from superbody.host.tracking.track import StampedView
+
+    class _View:
+        num_visible = 10
+
+    v = _View()
+    views = {
+        "a": StampedView(0, v, (0.0, 0.0), 0.2, (3.0, 0.0)), "b": StampedView(0, v, (0.05, 0.0), 0.0, (0.0, 3.0)),
+        "c": StampedView(0, v, (0.02, 0.01), np.inf, (0.0, -3.0)), "d": StampedView(0, v, (0.0, 0.4), 0.3, (0.0, -3.0)),
+        "e": StampedView(0, v, (0.01, 0.0), 0.2, (-3.0, 0.0)), "f": StampedView(0, v, (np.nan, np.nan), np.nan, (0.0, 3.0)),
+    }
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert one_body(views, np.zeros(2), 3.0, 0.08) == ["a", "b", "c", "d", "e", "f"]
+        # The same point 0.4 m off, from a camera whose line of sight runs across that offset (and
+        # along a's and e's, which are sure of it): another body.
+        views["d"] = views["d"]._replace(camera_xy=(-3.0, 0.4))
+        assert one_body(views, np.zeros(2), 3.0, 0.08) == ["a", "b", "c", "e", "f"]
