@@ -379,9 +379,9 @@ def _step(filters: Sequence[PoseFilter], t_ns: NDArray, pose: NDArray, std: NDAr
     pos[:, 2] = wrap_angle(pos[:, 2])
     # Without yaw measurements the yaw's variance would grow without end (past the PoseArray's
     # limit within two minutes); an angle's is pi^2 at most: the yaw axis's block is scaled down.
-    shrink = np.minimum(1.0, _MAX_YAW_VAR / cov.p00[:, 2])  # (n,)
-    for block in cov:
-        block[:, 2] *= shrink
+    scale = np.ones_like(cov.p00)  # (n, 3)
+    scale[:, 2] = np.minimum(1.0, _MAX_YAW_VAR / cov.p00[:, 2])
+    cov = AxisCov(*(block * scale for block in cov))  # new arrays: no block is scaled twice through an alias
     X, P = _packed(pos, rate, cov)
     out = []
     for k, f in enumerate(filters):
