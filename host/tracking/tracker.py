@@ -13,7 +13,8 @@ and a person unseen for 2 s is removed. This one adds:
   (``scipy.optimize.linear_sum_assignment``) on colour plus normalised geometric distance,
   infeasible pairs forbidden, so one greedy choice cannot steal another view's only match;
 - confirmed people are matched first, candidates then take the views left (else a candidate
-  beside a person got their view by shifting a neighbour's view onto that person's track);
+  beside a person got their view by shifting a neighbour's view onto that person's track); a
+  candidate its cameras do not corroborate pays ``evidence.UNCORROBORATED_COST`` per view;
 - a cue must vouch for a pair (with ``use_geometry``): colours that point to that track
   (``association.clearly_best``) or a ground point surer than ``gate_m`` in the gate;
 - care in starting people: a view starts a candidate only if it shows enough joints
@@ -63,7 +64,7 @@ from superbody.edge.messages.observation import Observation, PersonView
 from superbody.edge.site import Site
 from superbody.host.tracking.association import FrameViews, Match, _amplitudes, _median_over_history, assign, clearly_best, duplicate_views
 from superbody.host.tracking.config import TrackerConfig
-from superbody.host.tracking.evidence import clearly_sees, coincident, set_s_of_one_body, too_close
+from superbody.host.tracking.evidence import UNCORROBORATED_COST, clearly_sees, coincident, corroborated, set_s_of_one_body, too_close
 from superbody.host.tracking.ground import ground_points
 from superbody.host.tracking.motion import _NS_PER_S, fuse_positions, predict_positions
 from superbody.host.tracking.reid import REID_MARGIN, Lost, remembered_as
@@ -370,6 +371,7 @@ class Tracker:
                 feasible &= ~geo_known | near
                 cost += cfg.geometry_weight * np.where(geo_known, geo_d / radius, _UNKNOWN_COST)
             vouched = clearly_best(colour_d, REID_MARGIN) | (geo_known & (sigma < cfg.gate_m)[:, None])
+        cost += UNCORROBORATED_COST * np.array([not corroborated(tr, cfg.confirm_min_support) for tr in tracks])[None, :]
         rows, cols = assign(cost, feasible & vouched, first=np.array([tr.state == "confirmed" for tr in tracks], dtype=bool))
         return rows, cols, colour_d, geo_d, near
 

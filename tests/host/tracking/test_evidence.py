@@ -12,7 +12,7 @@ from superbody.host.tracking.config import TrackerConfig
 from superbody.host.tracking.evidence import EDGE_MARGIN, MERGE_AFTER_S, clearly_sees, coincident, too_close
 from superbody.host.tracking.track import Track
 from superbody.host.tracking.tracker import Tracker
-from tests.host.tracking.test_tracker import C1, C2, CAMS, SITE, T0, S, frame, make_camera, schedule
+from tests.host.tracking.test_tracker import C1, C2, C3, CAMS, SITE, T0, S, frame, make_camera, schedule
 
 
 def test_a_camera_clearly_sees_its_middle_not_its_edges_nor_behind_it():
@@ -326,6 +326,44 @@ def test_a_candidate_does_not_make_a_persons_view_go_to_their_neighbour():
     p_id, q_id = born[0].track_id, born[1].track_id
     assert {p_id, q_id} == ids
     assert got[0].track_id == p_id and got[1].track_id == q_id
+
+
+def test_a_candidate_its_cameras_corroborate_picks_its_persons_views_before_a_vague_wanderer():
+    """Scene l, seed 30 (12 s): a candidate built from a detector's random partial views, which
+    its cameras never corroborated, had wandered 2 m across the room on them, and its vague
+    prediction landed on a person whose own candidate stood there, corroborated by every camera.
+    A vague track is the cheaper match (its gate is wider): the wanderer took the person's views,
+    the person's candidate starved, and the person went unconfirmed for 3 s. A candidate its
+    cameras do not corroborate now pays for each view (``UNCORROBORATED_COST``); a view clearly
+    nearer to it is still its own."""
+    from superbody.edge.messages.observation import empty_histogram
+    from tests.host.tracking.test_tracker import person_view
+
+    tracker = Tracker(SITE)
+
+    def obs(cam, t, x, y):
+        v = person_view(cam, x, y, 0.0, empty_histogram())
+        return Observation(SITE.name, cam.id, t // 1_000_000, t, cam.width, cam.height, (v,))
+
+    for cam, t in schedule(1.0):  # a person at the origin, seen by every camera: not confirmed yet
+        tracker.update(obs(cam, t, 0.0, 0.0))
+    (person,) = tracker.tracks
+    assert person.state == "candidate" and person._support >= TrackerConfig().confirm_min_support * person._chances
+    t = T0 + S
+    (born,) = tracker.update(obs(C1, t, 3.0, 3.0))  # the wanderer: a partial view far away ...
+    wanderer = tracker.track(born.track_id)
+    assert wanderer is not None and wanderer is not person
+    # ... whose random walk brought its prediction onto the person, vague, its cameras silent.
+    wanderer._kf_x, wanderer._kf_t = np.array([person._kf_x[0], [0.0, 0.0]]), person._kf_t
+    wanderer._kf_P = np.diag([0.2, 2.0])
+    wanderer._chances, wanderer._support = 30, 3
+    for k, cam in enumerate((C2, C3, C1)):
+        (m,) = tracker.update(obs(cam, t + (k + 1) * 30_000_000, 0.0, 0.0))
+        assert m.track_id == person.id
+    t += S // 2
+    wanderer._kf_x, wanderer._kf_t, wanderer._kf_P = np.array([person._kf_x[0] + (0.8, 0.0), [0.0, 0.0]]), t, np.diag([0.01, 0.1])
+    (m,) = tracker.update(obs(C2, t, float(person._kf_x[0, 0]) + 0.8, float(person._kf_x[0, 1])))
+    assert m.track_id == wanderer.id
 
 
 def test_one_body_keeps_views_without_a_usable_ground_point_and_warns_of_nothing():
