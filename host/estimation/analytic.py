@@ -32,7 +32,8 @@ from superbody.edge.messages.observation import PersonView
 from superbody.edge.site import Site
 from superbody.host.estimation.estimator import Estimates
 
-__all__ = ["AnalyticEstimator", "GeometrySigmas", "triangulate", "joints_3d", "pair_points", "YAW_STD_NO_CUE", "NO_CUE", "HEAD", "PAIR"]
+__all__ = ["AnalyticEstimator", "GeometrySigmas", "triangulate", "joints_3d", "pair_points", "YAW_STD_NO_CUE", "NO_CUE", "HEAD", "PAIR",
+           "HEIGHT_STD_M", "MAX_PLACEMENT_STD_M"]
 
 # The 1-sigma (rad) of a yaw from nothing: no shoulder or hip pair, no nose with an eye or ear
 # (one side of a person cut off at an image edge, legs alone). The yaw is then 0 by convention and
@@ -44,6 +45,16 @@ YAW_STD_NO_CUE = math.inf
 NO_CUE, HEAD, PAIR = 0, 1, 2
 
 _HEIGHTS = np.asarray(body.TYPICAL_HEIGHT_M)
+# How much a joint's height varies between people and poses (host.tracking.ground's shoulders),
+# 1-sigma metres. A joint one camera placed at its typical height is unsure along that camera's
+# ray by HEIGHT_STD_M over the ray's slope towards the plane. The torso's centre leaves out the
+# joints unsure by more than MAX_PLACEMENT_STD_M: from a camera at hip height (1 m), a tall
+# person's hips (0.95-1.0 m up) lie on rays that meet the 0.91-m plane 5-20 m away. It keeps the
+# others, though a short person's hips come too close and shoulders too far: their mean cancels.
+# On dev.json (cameras about 2 m up) no joint is that unsure, at 1 m as at 3 m: the figures
+# are the same (``superbody eval ... --estimator analytic``).
+HEIGHT_STD_M = 0.10
+MAX_PLACEMENT_STD_M = 3.0
 _PAIRS = ((body.LEFT_SHOULDER, body.RIGHT_SHOULDER), (body.LEFT_HIP, body.RIGHT_HIP))
 _HEAD = (1, 2, 3, 4)  # eyes and ears
 
@@ -68,6 +79,12 @@ def triangulate(origins: NDArray, directions: NDArray) -> NDArray[np.float64]:
 def joints_3d(views: Mapping[str, PersonView], site: Site, joints: Sequence[int] | None = None) -> NDArray[np.float64]:
     """(17, 3) world joints of one person from its views; NaN rows for joints no camera saw
     (and for those not in ``joints``, when given)."""
+    return _joints_3d(views, site, joints)[0]
+
+
+def _joints_3d(views: Mapping[str, PersonView], site: Site, joints: Sequence[int] | None = None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``joints_3d``, and (17,) how far each joint may lie from its point on the floor, 1-sigma
+    metres, from its typical height's spread: 0 for a triangulated joint, NaN where unseen."""
     rays: list[list[tuple[NDArray, NDArray]]] = [[] for _ in range(body.NUM_KEYPOINTS)]
     only = None if joints is None else np.isin(np.arange(body.NUM_KEYPOINTS), joints)
     for cam_id, view in views.items():
@@ -79,19 +96,26 @@ def joints_3d(views: Mapping[str, PersonView], site: Site, joints: Sequence[int]
         for k, d in zip(vis, dirs):
             rays[k].append((origin, d))
     out = np.full((body.NUM_KEYPOINTS, 3), np.nan)
+    sigma = np.full(body.NUM_KEYPOINTS, np.nan)
     for j, rs in enumerate(rays):
         if len(rs) >= 2:
             o = np.array([r[0] for r in rs])
             d = np.array([r[1] for r in rs])
             # Nearly parallel rays triangulate badly: fall back to the typical height then.
             if np.linalg.norm(np.cross(d[0], d[1:]), axis=1).max() > 0.05:
-                out[j] = triangulate(o, d)
+                out[j], sigma[j] = triangulate(o, d), 0.0
                 continue
         if rs:
-            pts, ok = intersect_plane(np.array([r[0] for r in rs]), np.array([r[1] for r in rs]), _HEIGHTS[j])
+            o = np.array([r[0] for r in rs])
+            pts, ok = intersect_plane(o, np.array([r[1] for r in rs]), _HEIGHTS[j])
             if ok.any():
                 out[j] = pts[ok].mean(0)
-    return out
+                # A height off by HEIGHT_STD_M moves the point along the ray by that much over
+                # the ray's slope towards the plane: metres where the ray grazes it.
+                r = np.hypot(*(pts[ok, :2] - o[ok, :2]).T)
+                dh = np.abs(o[ok, 2] - _HEIGHTS[j])
+                sigma[j] = float(np.mean(HEIGHT_STD_M * r / np.maximum(dh, 1e-6))) / math.sqrt(int(ok.sum()))
+    return out, sigma
 
 
 def pair_points(views: Mapping[str, PersonView], site: Site, left: int, right: int,
@@ -163,12 +187,13 @@ class AnalyticEstimator:
         return out, cue
 
     def _one(self, views: Mapping[str, PersonView]) -> tuple[NDArray[np.float64], int]:
-        j = joints_3d(views, self.site)
+        j, sigma = _joints_3d(views, self.site)
         seen = ~np.isnan(j[:, 0])
         if not seen.any():
             return np.array([np.nan, np.nan, 0.0]), NO_CUE
-        torso = [t for t in body.TORSO if seen[t]]
-        centre = j[torso, :2].mean(0) if torso else j[seen, :2].mean(0)
+        torso = np.array([t for t in body.TORSO if seen[t]] or np.flatnonzero(seen))
+        sure = torso[sigma[torso] <= MAX_PLACEMENT_STD_M]  # a ray that grazes its plane places nothing
+        centre = j[sure if len(sure) else torso[[np.argmin(sigma[torso])]], :2].mean(0)
         facing = np.zeros(2)
         for left, right in _PAIRS:
             ends = pair_points(views, self.site, left, right, j)
