@@ -261,3 +261,39 @@ def test_the_four_person_room_with_a_detectors_false_positives(run):
     r = sc["estimators"]["analytic"]
     assert sc["spurious_prob"] > 0.1 and sc["phantom_views"] > 40 and sc["colour"] == "none"
     assert r["recall"] >= 0.95 and r["id_switches"] == 0 and r["extra_tracks"] == 0 and r["false_positive_share"] <= 0.05
+
+
+# --- over many seeds (benchmarks/scene_seeds.py) ---------------------------------------------
+
+def test_seeds_parse_ranges_and_lists_and_refuse_nonsense():
+    import argparse
+
+    from benchmarks.scene_seeds import parse_seeds
+
+    assert parse_seeds("11-14") == [11, 12, 13, 14]
+    assert parse_seeds("3, 1-2,3") == [1, 2, 3]
+    for bad in ("", "4-2", "-1", "a", "1-", "0-5000"):
+        with pytest.raises(argparse.ArgumentTypeError, match="--seeds"):
+            parse_seeds(bad)
+
+
+def test_seeds_summary_counts_the_seeds_that_met_the_bar():
+    from benchmarks.scene_seeds import summarise
+
+    def run(seed, met, sw, extra):
+        return "k", seed, {"estimators": {"analytic": {"meets_bar": met, "id_switches": sw, "extra_tracks": extra}}}
+
+    got = summarise([run(1, True, 0, 0), run(2, False, 3, 1), run(3, True, 0, 0)])
+    assert got == {("k", "analytic"): {"seeds": 3, "met": 2, "missed": [2], "id_switches": 3, "extra_tracks": 1}}
+
+
+def test_seeds_benchmark_runs_as_its_own_process():
+    out = subprocess.run([sys.executable, "-m", "benchmarks.scene_seeds", "--scenes", "d", "--seeds", "1-2", "--seconds", "4",
+                          "--estimators", "analytic", "--jobs", "2"], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    rows = [line for line in out.stdout.splitlines() if line.startswith("d ")]
+    assert [r.split()[1] for r in rows if "analytic" in r.split()[2:3]] == ["1", "2"]
+    assert "d analytic: bar met at" in out.stdout and "of 2 seeds" in out.stdout
+    bad = subprocess.run([sys.executable, "-m", "benchmarks.scene_seeds", "--seeds", "9-1"], cwd=ROOT, capture_output=True, text=True,
+                         timeout=60)
+    assert bad.returncode == 2 and "--seeds" in bad.stderr
