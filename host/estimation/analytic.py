@@ -7,7 +7,8 @@ fits the site. For one person's views:
    a joint seen by one camera is put where its ray reaches the joint's typical height
    (edge.body.TYPICAL_HEIGHT_M);
 2. position: the mean of the torso joints (shoulders, hips) on the floor, or of all joints if
-   no torso joint was seen;
+   no torso joint was seen, leaving out joints one camera placed on a ray that grazes their
+   plane (``MAX_PLACEMENT_STD_M``) unless nothing else is left;
 3. yaw: perpendicular to the left-right shoulder and hip lines (pointing to the body's front),
    averaged as vectors; with neither pair, from the nose against the ears/eyes; else 0. Each
    line's two ends come from the same cameras, those that saw both (``pair_points``): a shoulder
