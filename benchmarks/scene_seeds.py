@@ -20,6 +20,7 @@ import sys
 import time
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
+from contextlib import nullcontext
 
 from benchmarks.scenes import ESTIMATOR_NAMES, SCENES, _keys, run_scene
 
@@ -72,8 +73,8 @@ def main(scenes: Sequence[str], seeds: Sequence[int], seconds: float, estimators
     print(f"{'scene':<6} {'seed':>4} {'estimator':<9} {'recall':>6} {'IDsw':>4} {'extra':>5} {'FP%':>5} {'pos50':>5} {'yaw50':>5} {'bar':>3}", flush=True)
     jobs_ = [(key, seconds, seed, tuple(estimators)) for key in scenes for seed in seeds]
     runs: list[tuple[str, int, dict]] = []
-    with ProcessPoolExecutor(max_workers=jobs) if jobs > 1 else _Serial() as pool:
-        for key, seed, sc in pool.map(_one, jobs_):
+    with ProcessPoolExecutor(max_workers=jobs) if jobs > 1 else nullcontext() as pool:
+        for key, seed, sc in (pool.map if pool is not None else map)(_one, jobs_):
             runs.append((key, seed, sc))
             for name, r in sc["estimators"].items():
                 print(f"{key:<6} {seed:>4} {name:<9} {r['recall']:>6.3f} {r['id_switches']:>4} {r['extra_tracks']:>5} "
@@ -85,19 +86,6 @@ def main(scenes: Sequence[str], seeds: Sequence[int], seconds: float, estimators
               f"identity switches {s['id_switches']}, extra tracks {s['extra_tracks']}", flush=True)
     print(f"{time.monotonic() - t:.0f} s", flush=True)
     return 0
-
-
-class _Serial:
-    """``ProcessPoolExecutor``'s map, in this process."""
-
-    def __enter__(self) -> _Serial:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        return None
-
-    def map(self, fn, items):  # type: ignore[no-untyped-def]
-        return map(fn, items)
 
 
 if __name__ == "__main__":

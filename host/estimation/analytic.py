@@ -112,10 +112,11 @@ def _joints_3d(views: Mapping[str, PersonView], site: Site, joints: Sequence[int
             if ok.any():
                 out[j] = pts[ok].mean(0)
                 # A height off by HEIGHT_STD_M moves the point along the ray by that much over
-                # the ray's slope towards the plane: metres where the ray grazes it.
+                # the ray's slope towards the plane: metres where the ray grazes it. (Nearly
+                # parallel rays share that error: the same joint's height.)
                 r = np.hypot(*(pts[ok, :2] - o[ok, :2]).T)
                 dh = np.abs(o[ok, 2] - _HEIGHTS[j])
-                sigma[j] = float(np.mean(HEIGHT_STD_M * r / np.maximum(dh, 1e-6))) / math.sqrt(int(ok.sum()))
+                sigma[j] = float(np.mean(HEIGHT_STD_M * r / np.maximum(dh, 1e-6)))
     return out, sigma
 
 

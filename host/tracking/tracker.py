@@ -306,7 +306,7 @@ class Tracker:
         """A candidate with its 2 s of matches is a person if its views corroborate it and it stands
         in a room of its own (``host.tracking.evidence``)."""
         cfg = self.config
-        if tr._support < cfg.confirm_min_support * tr._chances:
+        if not corroborated(tr, cfg.confirm_min_support):
             return False
         if cfg.min_separation_m <= 0 or tr._kf_t is None:
             return True
