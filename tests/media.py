@@ -3,9 +3,11 @@
 - ``make media`` (scripts/opencv_media.sh): OpenCV's sample media from Debian's ``opencv-doc``
   package: ``vtest.avi`` (768 x 576, 795 frames at 10 fps, pedestrians seen by a fixed camera),
   ``basketball1.png`` (640 x 480, two people close up), ``messi5.jpg`` (548 x 342, one player);
-- ``make movenet`` (scripts/movenet_convert.py): MoveNet MultiPose converted to ONNX.
+- ``make movenet`` (scripts/movenet_convert.py): MoveNet MultiPose converted to ONNX;
+- ``make qemu`` (scripts/qemu_user.sh): QEMU's x86-64 user-mode emulator, to run a program as on
+  another CPU.
 
-Both land under ``$XDG_CACHE_HOME/superbody`` (``~/.cache/superbody``); a missing file fails the
+All land under ``$XDG_CACHE_HOME/superbody`` (``~/.cache/superbody``); a missing file fails the
 test with the target to run, never skips it.
 """
 
@@ -18,7 +20,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-__all__ = ["MEDIA", "media_path", "image", "vtest_frames", "movenet_model", "VTEST_SIZE"]
+__all__ = ["MEDIA", "media_path", "image", "vtest_frames", "movenet_model", "qemu_x86_64", "VTEST_SIZE"]
 
 MEDIA = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "superbody" / "opencv-media"
 VTEST_SIZE = (768, 576)  # (width, height)
@@ -65,4 +67,11 @@ def movenet_model() -> Path:
 
     path = default_model_path()
     assert path.is_file(), f"{path} is missing: run `make movenet` (make test does)"
+    return path
+
+
+def qemu_x86_64() -> Path:
+    """QEMU's static x86-64 user-mode emulator; fails naming ``make qemu`` when it is not there."""
+    path = MEDIA.parent / "qemu" / "qemu-x86_64-static"
+    assert path.is_file(), f"{path} is missing: run `make qemu` (make test does)"
     return path
