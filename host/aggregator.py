@@ -1,13 +1,19 @@
 """The host aggregator: Observations from every camera of a site in, PoseArrays out.
 
-The pure core, clock-injected: ``ingest()`` validates one payload and feeds the tracker (frames
-out of order, duplicated, stale or from the future are rejected by reason: ``Tracker.admit``);
-``camera_liveliness()`` admits only the site's own cameras, so no name a peer puts in a
-liveliness key ever reaches an encoder; ``step()`` prunes, takes each confirmed person's set S
-(latest fresh view per camera), estimates the people whose views changed in one batched call,
-filters (each estimate taken at the mean capture time of its views, the pose predicted on to
-the newest view's time), and returns the PoseArray. Bad payloads are counted by reason and
-dropped, never fatal. The process around it is ``host/service.py``.
+The pure core, clock-injected, in capture time: ``ingest()`` validates one payload as it arrives
+and hands it to the cameras' timeline (``host.timeline``), which admits it once (frames out of
+order, duplicated, stale, from the future or behind the watermark are rejected by reason) and
+measures each camera's delivery delay and frame rate; ``camera_liveliness()`` admits only the
+site's own cameras, so no name a peer puts in a liveliness key ever reaches an encoder.
+``step()`` moves the watermark (the newest capture instant every camera still delivering has
+delivered up to), feeds the tracker the frames captured up to it in capture order (a bounded
+number per step), prunes, takes each confirmed person's set S as of that instant (their latest
+view per camera, fresh then), estimates the people whose views changed in one batched call,
+filters (each estimate taken at the mean capture time of its views, the pose predicted on to the
+newest view's time), and returns the PoseArray. So a late camera's views are fused with the
+other cameras' views of the same instant, and the poses describe the world as of the watermark:
+``PoseArray.latency_ns`` is the host clock at the step minus that instant. Bad payloads are
+counted by reason and dropped, never fatal. The process around it is ``host/service.py``.
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ from superbody.host.estimation.estimator import Estimator, estimate_detailed
 from superbody.host.filtering.pose_filter import FilterConfig, PoseFilter, predict_many, update_many
 from superbody.host.messages import pose as pose_msg
 from superbody.host.messages.pose_rules import MAX_SPEED
+from superbody.host.timeline import Timeline
 from superbody.host.tracking.config import TrackerConfig
 from superbody.host.tracking.tracker import Tracker
 
@@ -43,7 +50,21 @@ class HostConfig:
     """Host parameters.
 
     Attributes:
-        freshness_s: a camera's latest view of a person counts in set S for this long.
+        freshness_s: a camera's latest view of a person counts in set S while it was captured at
+            most this long before the instant the host fuses (the watermark).
+        max_delay_s: the longest the host waits for a camera's frames after their capture: the
+            poses it publishes are at most this old (plus processing). A camera that delivers
+            later is too late to be useful: its frames are dropped ("too_late") and the status
+            says so. 1.5 s: real nodes deliver 0.1-1.5 s after capture.
+        restart_gap_s: a camera whose sequence number goes back is taken as restarted (its
+            frames are admitted again) after this long without frames from it, when the frame
+            after a refused one continues the new count, or when its liveliness token comes
+            back; otherwise such frames are dropped as "seq_backwards". A forged frame with a
+            high sequence number therefore costs a camera one real frame, never its view.
+        max_rate_factor: a camera may send this many times its site fps; the host process drops
+            the excess ("over_rate", ``host.timeline.RateLimit``) before decoding it.
+        max_frames_per_step: frames fed to the tracker per step at most; the rest wait for the
+            next step (bounded work per tick, however much arrived).
         max_future_s: observations stamped further ahead of the host's clock are rejected
             (nodes are NTP-synced to milliseconds; a looser limit lets a peer's stamps run ahead).
         queue_size: observations waiting to be processed; beyond it the oldest are dropped.
@@ -57,6 +78,10 @@ class HostConfig:
     """
 
     freshness_s: float = 0.5
+    max_delay_s: float = 1.5
+    restart_gap_s: float = 1.0
+    max_rate_factor: float = 2.0
+    max_frames_per_step: int = 256
     max_future_s: float = 0.25
     queue_size: int = 4096
     queue_bytes: int = 16 * 1024 * 1024
@@ -67,11 +92,17 @@ class HostConfig:
     filter: FilterConfig = field(default_factory=FilterConfig)
 
     def __post_init__(self) -> None:
-        for name, lo, hi in (("freshness_s", 0.01, 60.0), ("max_future_s", 0.0, 3600.0), ("min_publish_hz", 0.1, 1000.0),
+        for name, lo, hi in (("freshness_s", 0.01, 60.0), ("max_delay_s", 0.0, 60.0), ("restart_gap_s", 0.0, 600.0),
+                             ("max_rate_factor", 1.0, 1000.0), ("max_future_s", 0.0, 3600.0), ("min_publish_hz", 0.1, 1000.0),
                              ("max_publish_hz", 0.0, 1000.0), ("status_every_s", 0.1, 3600.0)):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and lo <= v <= hi):
                 raise ValueError(f"HostConfig.{name} must be in [{lo}, {hi}], got {v!r}")
+        if not (type(self.max_frames_per_step) is int and 1 <= self.max_frames_per_step <= 1_000_000):
+            raise ValueError(f"HostConfig.max_frames_per_step must be an integer in [1, 1000000], got {self.max_frames_per_step!r}")
+        if self.max_delay_s >= self.tracker.remove_after_s:
+            raise ValueError(f"HostConfig.max_delay_s ({self.max_delay_s}) must be shorter than tracker.remove_after_s "
+                             f"({self.tracker.remove_after_s}): a person would be removed before their late views could arrive")
         if not 1 <= self.queue_size <= 1_000_000:
             raise ValueError(f"HostConfig.queue_size must be in [1, 1000000], got {self.queue_size!r}")
         if not wire.MAX_PAYLOAD_BYTES <= self.queue_bytes <= 2**34:
@@ -103,17 +134,23 @@ class Aggregator:
         estimator: turns view sets into (x, y, yaw) (host.estimation.estimator).
         estimator_name: reported in every PoseArray, e.g. ``onnx:wtf-apartment.int8.onnx``.
         config: parameters.
+        start_ns: when the host started, its clock (the watermark waits ``max_delay_s`` from
+            then for cameras it has not heard from yet); the first ``step``'s clock by default.
     """
 
-    def __init__(self, site: Site, estimator: Estimator, estimator_name: str, config: HostConfig = HostConfig()):
+    def __init__(self, site: Site, estimator: Estimator, estimator_name: str, config: HostConfig = HostConfig(),
+                 start_ns: int | None = None):
         self.site = site
         self.estimator = estimator
         self.estimator_name = estimator_name
         self.config = config
         self.tracker = Tracker(site, config.tracker)
+        self.timeline = Timeline(site, config.max_delay_s, config.tracker.remove_after_s, config.restart_gap_s, start_ns)
+        self.as_of_ns: int | None = None  # the instant the last step fused every camera up to
         self.rejected: Counter[str] = Counter()
         self.accepted = 0
         self.cameras_alive: set[str] = set()
+        self.cameras_gone: set[str] = set()  # liveliness token dropped and not back
         self._filters: dict[int, PoseFilter] = {}
         self._last_input: dict[int, int] = {}  # track -> newest view stamp already estimated
         self._poses: dict[int, tuple[pose_msg.PersonPose, int]] = {}  # track -> (pose, newest stamp)
@@ -141,10 +178,10 @@ class Aggregator:
             return self._reject("image_size", f"camera {obs.camera}: image {obs.width}x{obs.height}, the site says {size[0]}x{size[1]}")
         if obs.stamp_ns > now_ns + self.config.max_future_s * _NS:
             return self._reject("future_stamp", f"camera {obs.camera}: stamp {(obs.stamp_ns - now_ns) / _NS:.1f} s ahead of the host clock")
-        why = self.tracker.admit(obs, now_ns)
-        self.tracker.update(obs, now_ns)  # a refused frame is counted (and remembered) there too
+        why = self.timeline.admit(obs, now_ns)
         if why is not None:
-            return self._reject(why, f"camera {obs.camera}: frame {obs.seq} stamped {obs.stamp_ns} ({_DROP_DETAIL.get(why, why)})")
+            return self._reject(why, f"camera {obs.camera}: frame {obs.seq} captured {(now_ns - obs.stamp_ns) / _NS:.2f} s ago "
+                                     f"({_DROP_DETAIL.get(why, why)})")
         self.accepted += 1
         return True
 
@@ -164,10 +201,12 @@ class Aggregator:
         if alive:
             if cam not in self.cameras_alive:
                 log.info("camera %s is alive", cam)
-                self.tracker.reset_camera(cam)  # a (re)started node counts its frames from 0 again
+                self.timeline.reset_camera(cam)  # a (re)started node counts its frames from 0 again
             self.cameras_alive.add(cam)
+            self.cameras_gone.discard(cam)
         else:
             self.cameras_alive.discard(cam)
+            self.cameras_gone.add(cam)
             log.warning("camera %s is gone (liveliness token dropped); it stops contributing", cam)
         return True
 
@@ -179,13 +218,20 @@ class Aggregator:
             log.warning("rejected observation (%s, %d so far): %s", reason, n, detail)
         return False
 
-    def step(self, now_ns: int, latency_ns: int = 0) -> pose_msg.PoseArray:
-        """Prune, estimate the people with new views, filter, and build the PoseArray."""
-        for tr in self.tracker.prune(now_ns):
+    def step(self, now_ns: int) -> pose_msg.PoseArray:
+        """Fuse the frames the watermark passed, prune, estimate the people with new views, filter,
+        and build the PoseArray as of the fused instant (``as_of_ns``)."""
+        self.timeline.watermark(now_ns)
+        for obs in self.timeline.release(self.config.max_frames_per_step):
+            self.tracker.update(obs)
+        t = self.timeline.released_to()
+        assert t is not None  # the watermark has been moved
+        self.as_of_ns = t
+        for tr in self.tracker.prune(t):
             self._filters.pop(tr.id, None)
             self._last_input.pop(tr.id, None)
             self._poses.pop(tr.id, None)
-        sets = self.tracker.view_sets(now_ns, self.config.freshness_s)
+        sets = self.tracker.view_sets(t, self.config.freshness_s)
         stamps_of: dict[int, list[int]] = {}
         for tid, views in sets.items():
             track = self.tracker.track(tid)
@@ -203,6 +249,9 @@ class Aggregator:
                 self.rejected["no_estimate"] += int((~ok).sum())
             rows = np.flatnonzero(ok)
             tids = [todo[i] for i in rows]
+            for tid in tids:
+                for cam in sets[tid]:
+                    self.timeline.cameras[cam].fused += 1
             stamps = [newest[tid] for tid in tids]
             filters = [self._filters.setdefault(tid, PoseFilter(self.config.filter)) for tid in tids]
             # The cameras are not synchronised: set S mixes views captured up to a frame or more
@@ -228,7 +277,7 @@ class Aggregator:
         people = tuple(p for tid, (p, _) in sorted(self._poses.items()) if tid in sets)
         self._seq += 1
         return pose_msg.PoseArray(
-            site=self.site.name, seq=self._seq, stamp_ns=now_ns, people=people, latency_ns=max(0, int(latency_ns)),
+            site=self.site.name, seq=self._seq, stamp_ns=now_ns, people=people, latency_ns=max(0, int(now_ns) - t),
             cameras_alive=tuple(sorted(self.cameras_alive)), estimator=self.estimator_name,
         )
 
@@ -238,6 +287,7 @@ _DROP_DETAIL = {
     "duplicate": "the same stamp or sequence number as the last one",
     "seq_backwards": "sequence number went back without a restart",
     "stale": "too old to keep anyone alive",
+    "too_late": "captured before the instant the host had already fused: it delivers later than --max-delay",
 }
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import os
 import sys
 from dataclasses import replace
@@ -16,6 +17,7 @@ from pathlib import Path
 from superbody.edge.cli_args import add_clock_args, add_session_args, clock_from_args, config_from_args, int_in, positive, stop_on_signals
 from superbody.edge.resources import site_path
 from superbody.edge.site import NAME_RE, SiteError, load_site
+from superbody.host.aggregator import HostConfig
 from superbody.host.demo import DEFAULT_SITE, DEMO_PORT, DemoConfig, run_demo
 from superbody.host.outputs.record import record
 from superbody.host.outputs.ros2 import _MAX_DOMAIN, Ros2Config, Ros2Publisher, Ros2Sink, _typestore, check_topic
@@ -32,8 +34,23 @@ def _unit(text: str) -> float:
     return v
 
 
+def _seconds_in(lo: float, hi: float, flag: str):
+    """An argparse type: seconds in [lo, hi], the error naming the flag and the range."""
+
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{flag} must be a number of seconds in [{lo}, {hi}], got {text!r}") from None
+        if not (math.isfinite(v) and lo <= v <= hi):
+            raise argparse.ArgumentTypeError(f"{flag} must be a number of seconds in [{lo}, {hi}], got {text}")
+        return v
+
+    return parse
+
+
 def _run_host(args: argparse.Namespace) -> int:
-    from superbody.host.aggregator import Aggregator, HostConfig
+    from superbody.host.aggregator import Aggregator
     from superbody.host.estimation import build_estimator
     from superbody.host.estimation.estimator import ModelMismatchError
     from superbody.host.filtering.pose_filter import FilterConfig
@@ -44,8 +61,9 @@ def _run_host(args: argparse.Namespace) -> int:
     try:
         site = load_site(args.site)
         estimator, name = build_estimator(site, args.estimator, args.model)
+        timing = {k: v for k, v in (("freshness_s", args.freshness), ("max_delay_s", args.max_delay)) if v is not None}
         config = HostConfig(
-            freshness_s=args.freshness, max_publish_hz=args.max_rate, status_every_s=args.status_every,
+            **timing, max_publish_hz=args.max_rate, status_every_s=args.status_every,
             tracker=replace(TrackerConfig(), d_max=args.d_max, use_geometry=not args.no_geometry),
             filter=replace(FilterConfig(), enabled=not args.no_filter),
         )
@@ -99,7 +117,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--estimator", choices=ESTIMATORS, default="auto",
                    help="pose estimator (default auto: hybrid when the model carries a hybrid calibration, else the network alone)")
     p.add_argument("--model", help="ONNX model (default: the shipped models/<site>.fp32.onnx)")
-    p.add_argument("--freshness", type=positive, default=0.5, help="seconds a camera's view stays in set S (default 0.5)")
+    p.add_argument("--max-delay", type=_seconds_in(0.0, 1.9, "--max-delay"), default=None, metavar="S",
+                   help="longest the host waits for a camera's frames after their capture: poses are published this much in the past "
+                        f"at most, and a camera that delivers later is left out and reported (default {HostConfig.max_delay_s})")
+    p.add_argument("--freshness", type=_seconds_in(0.01, 60.0, "--freshness"), default=None, metavar="S",
+                   help="a camera's view stays in a person's set S while captured at most this long before the instant the host fuses "
+                        f"(default {HostConfig.freshness_s})")
     p.add_argument("--d-max", type=_unit, default=0.65, help="colour match threshold, Bhattacharyya distance (default 0.65)")
     p.add_argument("--no-geometry", action="store_true", help="match on colour only, as the paper (no ground-point gate)")
     p.add_argument("--no-filter", action="store_true", help="per-frame output: no temporal filtering")

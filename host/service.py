@@ -1,13 +1,19 @@
 """The host process loop around the pure ``Aggregator`` (host/aggregator.py).
 
-A Zenoh subscriber whose callback only queues the raw payload (heavy work stays off Zenoh's
-thread; a payload larger than the decoder accepts is counted and dropped before it is copied,
-and the queue is bounded in bytes as well as in messages), a loop that drains the queue, steps
-the aggregator and hands each PoseArray to the output sinks (host/outputs/: Zenoh first, then
-serial, ROS 2, ...), camera liveliness, and a periodic one-line status, also published as JSON
-on ``superbody/<site>/host/status`` (``host.messages.status.HostStatus``): ``{"cameras_alive":
-[ids], "cameras_total": n, "people": n, "obs_per_s": f, "latency_ms": {"p50": f | null, "p99":
-f | null}, "rejected": {reason: n}, "queue_dropped": n, "published": n}``.
+A Zenoh subscriber whose callback only queues the raw payload, stamped with its arrival on the
+world clock (heavy work stays off Zenoh's thread). Before it queues, a payload larger than the
+decoder accepts is counted and dropped, and so is a frame beyond its camera's rate limit
+(``host.timeline.RateLimit``: ``HostConfig.max_rate_factor`` times the camera's site fps); each
+camera has a queue of its own, bounded in messages and bytes, so one camera's flood only ever
+costs that camera's frames. The loop ticks: it takes at most ``HostConfig.max_frames_per_step``
+payloads from the cameras' queues in turn, ingests them, steps the aggregator (which fuses, in
+capture order, the frames captured up to its watermark) and hands the PoseArray to the output
+sinks (host/outputs/: Zenoh first, then serial, ROS 2, ...). So however much arrives, a tick's
+work is bounded and the host publishes at its rate. A PoseArray computed before a stall of the
+process (a frozen host, a swapped-out machine) is never published after it. The status goes out
+on its own schedule, every ``status_every_s``, as one log line and as JSON on
+``superbody/<site>/host/status`` (``host.messages.status.HostStatus``, docs/status-schema.md):
+counters, capture-to-publish latency, the overall health and every camera's timing.
 
 ``superbody host run --site SITE.toml [--model M.onnx | --estimator analytic]``.
 """
@@ -27,15 +33,22 @@ from superbody.edge import transport
 from superbody.edge.clock import WorldClock
 from superbody.edge.messages import wire
 from superbody.host.aggregator import Aggregator
+from superbody.host.health import CameraWatch, camera_statuses, health_of
 from superbody.host.memory import release_free_memory
 from superbody.host.messages import pose as pose_msg
 from superbody.host.messages import status as host_status
 from superbody.host.outputs import Sink
 from superbody.host.outputs.zenoh_sink import ZenohSink
+from superbody.host.timeline import RateLimit
 
 __all__ = ["run_host"]
 
 log = logging.getLogger("superbody.host")
+
+
+# A PoseArray whose step began longer ago than this (the process was frozen, or starved of CPU)
+# is dropped, never published late: its poses are that much older than it says ("stalled").
+STALL_S = 0.5
 
 
 def _percentiles(values: deque) -> tuple[float, float]:
@@ -43,6 +56,102 @@ def _percentiles(values: deque) -> tuple[float, float]:
         return math.nan, math.nan
     a = np.fromiter(values, float)
     return float(np.percentile(a, 50)), float(np.percentile(a, 99))
+
+
+class _Intake:
+    """What Zenoh's thread hands the loop: payloads in one bounded queue per camera (and one for
+    every other key), liveliness events, and the counts of what was refused before queueing."""
+
+    def __init__(self, aggregator: Aggregator, clock: WorldClock) -> None:
+        cfg = aggregator.config
+        self.clock = clock
+        self.wake = threading.Condition()
+        self.queues: dict[str, deque[tuple[bytes, str, int]]] = {c.id: deque() for c in aggregator.site.cameras}
+        self.queues[""] = deque()  # keys of no camera of the site: refused once decoded
+        self._bytes = dict.fromkeys(self.queues, 0)
+        self._per_queue = max(16, cfg.queue_size // len(self.queues))
+        self._per_queue_bytes = max(wire.MAX_PAYLOAD_BYTES, cfg.queue_bytes // len(self.queues))
+        self._limit = RateLimit(aggregator.site, cfg.max_rate_factor)
+        self.alive_events: deque[tuple[str, bool]] = deque()
+        self.oversize: list[tuple[str, int]] = []  # (key, size), the first 1000 of a flood
+        self.refused: Counter[tuple[str, str]] = Counter()  # (camera or "", over_rate | queue_full | oversize) -> n
+        self.queue_dropped = 0
+
+    def on_sample(self, sample) -> None:
+        # Only queue here: decoding and estimation run on the host loop, off Zenoh's thread.
+        size = len(sample.payload)
+        key = str(sample.key_expr)
+        cam = transport.camera_from_key(key)
+        q = cam if cam and cam in self.queues else ""
+        with self.wake:
+            if size > wire.MAX_PAYLOAD_BYTES:  # never copied: the decoder would refuse it anyway
+                if len(self.oversize) < 1000:
+                    self.oversize.append((key[:200], size))
+                self.refused["", "oversize"] += 1
+                self.wake.notify()
+                return
+            arrival = self.clock.now_ns()
+            if q and not self._limit.allow(q, arrival):
+                self.refused[q, "over_rate"] += 1
+                return
+            pending = self.queues[q]
+            while pending and (len(pending) >= self._per_queue or self._bytes[q] + size > self._per_queue_bytes):
+                self._bytes[q] -= len(pending.popleft()[0])
+                self.refused[q, "queue_full"] += 1
+                self.queue_dropped += 1
+            pending.append((sample.payload.to_bytes(), key, arrival))
+            self._bytes[q] += size
+            self.wake.notify()
+
+    def on_alive(self, sample) -> None:
+        import zenoh
+
+        with self.wake:  # applied on the host loop, like everything else that changes the aggregator
+            if len(self.alive_events) < 4096:  # bounded even if a peer flaps tokens faster than we loop
+                self.alive_events.append((str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT))
+            self.wake.notify()
+
+    def wait(self, timeout_s: float) -> None:
+        with self.wake:
+            if not any(self.queues.values()) and not self.alive_events:
+                self.wake.wait(timeout=timeout_s)
+
+    def hand_over(self, aggregator: Aggregator) -> Counter[str]:
+        """Apply liveliness events and count what was refused on Zenoh's thread; returns those counts by reason."""
+        with self.wake:
+            events, big, refused = list(self.alive_events), self.oversize[:], self.refused.copy()
+            self.alive_events.clear()
+            self.oversize.clear()
+            self.refused.clear()
+        now = self.clock.now_ns()
+        for key, alive in events:
+            aggregator.camera_liveliness(key, alive)
+        by_reason: Counter[str] = Counter()
+        for (cam, reason), n in refused.items():
+            by_reason[reason] += n
+            if reason == "oversize":
+                for i in range(n):
+                    key, size = big[i] if i < len(big) else ("?", 0)
+                    aggregator._reject("oversize", f"{key}: {size} bytes, more than the {wire.MAX_PAYLOAD_BYTES} allowed")
+            else:
+                aggregator.timeline.count_drop(cam, reason, now, n)
+                if reason == "over_rate":
+                    aggregator.rejected["over_rate"] += n
+        return by_reason
+
+    def take(self, budget: int) -> list[tuple[bytes, str, int]]:
+        """Up to ``budget`` payloads, one per camera queue in turn (a flooded camera waits its turn)."""
+        out: list[tuple[bytes, str, int]] = []
+        with self.wake:
+            while len(out) < budget:
+                ready = [q for q, pending in self.queues.items() if pending]
+                if not ready:
+                    break
+                for q in ready[: budget - len(out)]:
+                    item = self.queues[q].popleft()
+                    self._bytes[q] -= len(item[0])
+                    out.append(item)
+        return out
 
 
 def run_host(
@@ -72,116 +181,98 @@ def run_host(
     stop = stop or threading.Event()
     site = aggregator.site
     cfg = aggregator.config
-    pending: deque[tuple[bytes, str, int]] = deque()
-    wake = threading.Condition()
+    intake = _Intake(aggregator, clock)
     counters: Counter[str] = Counter()
-    queued_bytes = 0
-    alive_events: deque[tuple[str, bool]] = deque()
-    oversize: list[tuple[str, int]] = []  # (key, size) refused on Zenoh's thread, reported by the loop
     latencies: deque[float] = deque(maxlen=20_000)
-
-    def on_sample(sample) -> None:
-        # Only queue here: decoding and estimation run on the host loop, off Zenoh's thread.
-        nonlocal queued_bytes
-        size = len(sample.payload)
-        if size > wire.MAX_PAYLOAD_BYTES:  # never copied: the decoder would refuse it anyway
-            with wake:
-                if len(oversize) < 1000:  # the details of a flood are not all kept
-                    oversize.append((str(sample.key_expr)[:200], size))
-                counters["oversize"] += 1
-                wake.notify()
-            return
-        with wake:
-            while pending and (len(pending) >= cfg.queue_size or queued_bytes + size > cfg.queue_bytes):
-                queued_bytes -= len(pending.popleft()[0])
-                counters["queue_dropped"] += 1
-            pending.append((sample.payload.to_bytes(), str(sample.key_expr), time.time_ns()))
-            queued_bytes += size
-            wake.notify()
-
-    def on_alive(sample) -> None:
-        # Applied on the host loop, like everything else that changes the aggregator.
-        with wake:
-            if len(alive_events) < 4096:  # bounded even if a peer flaps tokens faster than we loop
-                alive_events.append((str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT))
-            wake.notify()
-
     end = None if duration_s is None else time.monotonic() + duration_s
     min_period = 1.0 / cfg.min_publish_hz
     max_period = 1.0 / cfg.max_publish_hz if cfg.max_publish_hz > 0 else 0.0
+    stall_ns = int(STALL_S * 1e9 * clock.scale)
+    watch = CameraWatch()
     with zenoh.open(conf) as session:
         token = session.liveliness().declare_token(transport.host_alive_key(site.name))
         outputs: list[Sink] = [ZenohSink(session, site.name), *sinks]
-        live = session.liveliness().declare_subscriber(transport.camera_alive_key(site.name), on_alive, history=True)
+        live = session.liveliness().declare_subscriber(transport.camera_alive_key(site.name), intake.on_alive, history=True)
         status_pub = session.declare_publisher(transport.host_status_key(site.name), encoding=host_status.zenoh_encoding())
-        sub = session.declare_subscriber(transport.observation_key(site.name), on_sample)
-        log.info("host for site %s: %d cameras, estimator %s, publishing on %s", site.name, len(site.cameras),
-                 aggregator.estimator_name, transport.people_key(site.name))
+        sub = session.declare_subscriber(transport.observation_key(site.name), intake.on_sample)
+        log.info("host for site %s: %d cameras, estimator %s, publishing on %s (waiting up to %.2f s for late cameras)",
+                 site.name, len(site.cameras), aggregator.estimator_name, transport.people_key(site.name), cfg.max_delay_s)
         last_pub = last_status = time.monotonic()
-        obs_since_status = 0
+        obs_since_status = people = 0
+        recent: Counter[str] = Counter()  # the host's own trouble since the last status: queue_full, stalled
         while not stop.is_set() and (end is None or time.monotonic() < end):
-            with wake:
-                if not pending and not alive_events:
-                    wake.wait(timeout=min(min_period, 0.05))
-                events = list(alive_events)
-                alive_events.clear()
-                n_oversize, counters["oversize"] = counters["oversize"], 0
-                big = oversize[:]
-                oversize.clear()
-            for key, alive in events:
-                aggregator.camera_liveliness(key, alive)
-            for i in range(n_oversize):
-                key, size = big[i] if i < len(big) else ("?", 0)
-                aggregator._reject("oversize", f"{key}: {size} bytes, more than the {wire.MAX_PAYLOAD_BYTES} allowed")
-            if max_period and time.monotonic() - last_pub < max_period:
-                time.sleep(max(0.0, max_period - (time.monotonic() - last_pub)))
-            newest_arrival = None
-            while True:
-                with wake:
-                    if not pending:
-                        break
-                    payload, key, arrival = pending.popleft()
-                    queued_bytes -= len(payload)
-                if aggregator.ingest(payload, key, clock.now_ns()):
-                    newest_arrival = arrival
-                obs_since_status += 1
-            if newest_arrival is None and time.monotonic() - last_pub < min_period:
-                continue
-            arr = aggregator.step(clock.now_ns())
-            now_wall = time.time_ns()
-            if newest_arrival is not None:
-                arr = pose_msg.PoseArray(arr.site, arr.seq, arr.stamp_ns, arr.people, now_wall - newest_arrival,
-                                         arr.cameras_alive, arr.estimator)
-                latencies.append((now_wall - newest_arrival) / 1e6)
-            try:
-                outputs[0].publish(arr)  # Zenoh first: what it cannot encode goes nowhere
-            except ValueError as e:  # e.g. a filter glitch no subscriber would accept
-                aggregator.rejected["unpublishable"] += 1
-                log.error("pose array not published: %s", e)
-                continue
-            counters["published"] += 1
-            for sink in outputs[1:]:
-                sink.publish(arr)
-            last_pub = time.monotonic()
-            if last_pub - last_status >= cfg.status_every_s:
-                p50, p99 = _percentiles(latencies)
-                status = host_status.HostStatus(
-                    cameras_alive=sorted(aggregator.cameras_alive), cameras_total=len(site.cameras), people=len(arr.people),
-                    obs_per_s=obs_since_status / (last_pub - last_status), latency_ms=host_status.latency(p50, p99),
-                    rejected=dict(aggregator.rejected), queue_dropped=counters["queue_dropped"], published=counters["published"],
-                )
+            intake.wait(min(min_period, 0.05))
+            recent.update({k: n for k, n in intake.hand_over(aggregator).items() if k == "queue_full"})
+            batch = intake.take(cfg.max_frames_per_step)  # bounded work per tick, every camera in turn
+            for payload, key, arrival in batch:
+                aggregator.ingest(payload, key, arrival)
+            obs_since_status += len(batch)
+            tick = time.monotonic()
+            if (batch or tick - last_pub >= min_period) and tick - last_pub >= max_period:
+                stepped = clock.now_ns()
+                arr = aggregator.step(stepped)
+                published_ns = clock.now_ns()
+                if published_ns - stepped > stall_ns:  # frozen between the step and now: these poses are stale
+                    aggregator.rejected["stalled"] += 1
+                    recent["stalled"] += 1
+                    log.warning("a pose array computed %.1f s ago was dropped, not published (the host stalled)",
+                                (published_ns - stepped) / 1e9 / clock.scale)
+                elif _publish(outputs, aggregator, arr, published_ns):
+                    if aggregator.timeline.released:  # once a camera's frame is in: before, an array describes nothing
+                        latencies.append((published_ns - (aggregator.as_of_ns or published_ns)) / 1e6)
+                    counters["published"] += 1
+                    people = len(arr.people)
+                last_pub = time.monotonic()
+            if time.monotonic() - last_status >= cfg.status_every_s:  # its own schedule, published or not
+                status = _status(aggregator, clock.now_ns(), watch, recent, obs_since_status / (time.monotonic() - last_status), people,
+                                 latencies, intake.queue_dropped, counters["published"])
                 status_pub.put(host_status.encode(status))
-                rej = ", ".join(f"{k} {v}" for k, v in sorted(aggregator.rejected.items())) or "none"
-                log.info("cameras alive %d/%d (%s) | people %d | obs/s %.0f | latency p50 %.2f ms p99 %.2f ms | rejected: %s | queue dropped %d",
-                         len(aggregator.cameras_alive), len(site.cameras), ",".join(status.cameras_alive) or "-",
-                         len(arr.people), status.obs_per_s, p50, p99, rej, counters["queue_dropped"])
-                last_status, obs_since_status = last_pub, 0
+                last_status, obs_since_status = time.monotonic(), 0
+                recent.clear()
                 release_free_memory()  # what a burst of work left free goes back to the system (host.memory)
         sub.undeclare()
         status_pub.undeclare()
         live.undeclare()
         outputs[0].close()
         token.undeclare()
+    counters["queue_dropped"] = intake.queue_dropped
     p50, p99 = _percentiles(latencies)
     return {"published": counters["published"], "accepted": aggregator.accepted, "rejected": dict(aggregator.rejected),
             "queue_dropped": counters["queue_dropped"], "latency_ms": {"p50": p50, "p99": p99}}
+
+
+def _publish(outputs: Sequence[Sink], aggregator: Aggregator, arr: pose_msg.PoseArray, published_ns: int) -> bool:
+    """Hand the PoseArray to every sink, its ``latency_ns`` the age of the instant it describes; False if unpublishable."""
+    age = max(0, published_ns - (aggregator.as_of_ns or published_ns))
+    arr = pose_msg.PoseArray(arr.site, arr.seq, arr.stamp_ns, arr.people, age, arr.cameras_alive, arr.estimator)
+    try:
+        outputs[0].publish(arr)  # Zenoh first: what it cannot encode goes nowhere
+    except ValueError as e:  # e.g. a filter glitch no subscriber would accept
+        aggregator.rejected["unpublishable"] += 1
+        log.error("pose array not published: %s", e)
+        return False
+    for sink in outputs[1:]:
+        sink.publish(arr)
+    return True
+
+
+def _status(aggregator: Aggregator, now_ns: int, watch: CameraWatch, recent: Counter[str], obs_per_s: float, people: int,
+            latencies: deque, queue_dropped: int, published: int) -> host_status.HostStatus:
+    """The status now, and its log line; a camera whose problems start or end is logged too."""
+    site = aggregator.site
+    cameras = camera_statuses(aggregator.timeline, aggregator.cameras_alive, aggregator.cameras_gone, now_ns)
+    watch.update(cameras)
+    reasons = {"queue_full": "host: {n} frames dropped unread, their camera's queue was full: the host is slower than its cameras",
+               "stalled": "host: {n} pose arrays dropped, computed before the host stalled"}
+    health = health_of(cameras, [reasons[k].format(n=n) for k, n in recent.items() if n and k in reasons])
+    p50, p99 = _percentiles(latencies)
+    status = host_status.HostStatus(
+        cameras_alive=sorted(aggregator.cameras_alive), cameras_total=len(site.cameras), people=people, obs_per_s=obs_per_s,
+        latency_ms=host_status.latency(p50, p99), rejected=dict(aggregator.rejected), queue_dropped=queue_dropped,
+        published=published, health=health, cameras=cameras,
+    )
+    rej = ", ".join(f"{k} {v}" for k, v in sorted(aggregator.rejected.items())) or "none"
+    log.info("%s | cameras alive %d/%d (%s) | people %d | obs/s %.0f | capture-to-publish p50 %.0f ms p99 %.0f ms | rejected: %s | "
+             "queue dropped %d", health.state, len(aggregator.cameras_alive), len(site.cameras), ",".join(status.cameras_alive) or "-",
+             people, obs_per_s, p50, p99, rej, queue_dropped)
+    return status

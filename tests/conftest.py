@@ -8,6 +8,7 @@ import socket
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -96,6 +97,8 @@ class HostWatch:
 
         self.arrays: list = []
         self.status: list[dict] = []
+        self.arrived: list[float] = []  # time.monotonic() of each PoseArray's arrival
+        self.status_arrived: list[float] = []
         self.cv = threading.Condition()
         self.subs = [session.declare_subscriber(transport.people_key(site), self._people),
                      session.declare_subscriber(transport.host_status_key(site), self._status)]
@@ -103,13 +106,17 @@ class HostWatch:
     def _people(self, sample) -> None:
         from superbody.host.messages import pose as pose_msg
 
+        arr = pose_msg.decode(sample.payload.to_bytes())
         with self.cv:
-            self.arrays.append(pose_msg.decode(sample.payload.to_bytes()))
+            self.arrays.append(arr)
+            self.arrived.append(time.monotonic())
             self.cv.notify_all()
 
     def _status(self, sample) -> None:
+        doc = json.loads(sample.payload.to_bytes())
         with self.cv:
-            self.status.append(json.loads(sample.payload.to_bytes()))
+            self.status.append(doc)
+            self.status_arrived.append(time.monotonic())
             self.cv.notify_all()
 
     def wait(self, predicate, timeout: float) -> bool:

@@ -3,11 +3,14 @@
 The schema, for dashboards and alarms in any language, is in ``docs/status-schema.md``. In short::
 
     {"cameras_alive": ["1", "2"], "cameras_total": 3, "people": 2, "obs_per_s": 44.9,
-     "latency_ms": {"p50": 1.8, "p99": 3.4}, "rejected": {"late": 2}, "queue_dropped": 0,
-     "published": 431}
+     "latency_ms": {"p50": 120.4, "p99": 180.2}, "rejected": {"late": 2}, "queue_dropped": 0,
+     "published": 431, "health": {"state": "degraded", "reasons": ["camera 3: too_late: ..."]},
+     "cameras": [{"id": "1", "alive": true, "state": "ok", "fps": 15.0, "delay_ms": {"p50": 95.1, "p95": 130.0},
+                  "frames": 4300, "fused": 3900, "dropped": {}, "problems": []}, ...]}
 
-``latency_ms.p50`` and ``p99`` are ``null`` until the host has published a PoseArray that used a
-new observation. The status is version 1 of ``superbody.host_status`` (its Zenoh encoding says so,
+``latency_ms`` is capture-to-publish: from the instant a PoseArray describes (the host's
+watermark, ``host.timeline``) to its publication; ``p50`` and ``p99`` are ``null`` until the host
+has published one. The status is version 1 of ``superbody.host_status`` (its Zenoh encoding says so,
 ``ENCODING``, as every superbody message's does); it may gain fields without a new version, and
 ``decode`` ignores fields it does not know. ``encode`` checks every value (a few comparisons: the host builds the status
 from its own counters) and writes compact JSON with msgspec, which never writes ``NaN``.
@@ -27,8 +30,8 @@ from superbody.edge.site import NAME_RE
 if TYPE_CHECKING:
     import zenoh
 
-__all__ = ["SCHEMA", "VERSION", "ENCODING", "MAX_PAYLOAD_BYTES", "MAX_CAMERAS", "Latency", "HostStatus", "latency", "encode",
-           "decode", "zenoh_encoding"]
+__all__ = ["SCHEMA", "VERSION", "ENCODING", "MAX_PAYLOAD_BYTES", "MAX_CAMERAS", "HEALTH_STATES", "CAMERA_STATES", "Latency", "Delay",
+           "Health", "CameraStatus", "HostStatus", "latency", "delay", "encode", "decode", "zenoh_encoding"]
 
 SCHEMA: Final[str] = "superbody.host_status"
 VERSION: Final[int] = 1
@@ -43,13 +46,51 @@ MAX_PAYLOAD_BYTES: Final[int] = 64 * 1024
 _NonNegative = Annotated[int, Meta(ge=0)]
 _Milliseconds = Annotated[float, Meta(ge=0.0)]
 
+HEALTH_STATES: Final[tuple[str, ...]] = ("ok", "degraded")
+# A camera's state: its first problem's word (host.timeline.Timeline.problems), or "gone" (its
+# liveliness token dropped), or "ok".
+CAMERA_STATES: Final[tuple[str, ...]] = ("ok", "gone", "silent", "too_late", "slow", "over_rate", "two_publishers", "moved")
+MAX_REASONS: Final[int] = 256
+_Reason = Annotated[str, Meta(max_length=512)]
+
 
 class Latency(Struct, kw_only=True):
-    """Median and 99th percentile of the host's latency, milliseconds (arrival of the newest
-    observation used to the publication of its PoseArray); null before the first such PoseArray."""
+    """Median and 99th percentile of the host's latency, milliseconds: capture-to-publish, from
+    the instant a PoseArray describes (the watermark) to its publication; null before the first."""
 
     p50: _Milliseconds | None
     p99: _Milliseconds | None
+
+
+class Delay(Struct, kw_only=True):
+    """A camera's delivery delay, milliseconds: its frames' arrival at the host minus their
+    capture, median and 95th percentile over its last frames; null before its first frame."""
+
+    p50: _Milliseconds | None
+    p95: _Milliseconds | None
+
+
+class Health(Struct, kw_only=True):
+    """What a monitoring app alarms on: ``ok``, or ``degraded`` with one sentence per reason."""
+
+    state: Annotated[str, Meta(pattern="^(ok|degraded)$", description="ok, or degraded (see reasons)")]
+    reasons: Annotated[list[_Reason], Meta(max_length=MAX_REASONS, description="why degraded: one sentence each, "
+                                                                               "'camera <id>: <state>: ...' for a camera's")]
+
+
+class CameraStatus(Struct, kw_only=True):
+    """One camera of the site, as the host sees it."""
+
+    id: Annotated[str, Meta(pattern=NAME_PATTERN)]
+    alive: Annotated[bool, Meta(description="its liveliness token is present")]
+    state: Annotated[str, Meta(pattern="^(" + "|".join(CAMERA_STATES) + ")$", description="ok, or its first problem")]
+    fps: Annotated[float, Meta(ge=0.0)] | None = None
+    delay_ms: Delay
+    frames: Annotated[int, Meta(ge=0, description="frames admitted")]
+    fused: Annotated[int, Meta(ge=0, description="its views used in published poses")]
+    dropped: Annotated[dict[str, _NonNegative], Meta(description="frames dropped, by reason: too_late, late, duplicate, "
+                                                                 "seq_backwards, stale, over_rate, queue_full")]
+    problems: Annotated[list[_Reason], Meta(max_length=16, description="what is wrong with it, one sentence each")]
 
 
 class HostStatus(Struct, kw_only=True):
@@ -65,6 +106,9 @@ class HostStatus(Struct, kw_only=True):
     rejected: Annotated[dict[str, _NonNegative], Meta(description="observations (and poses) dropped, by reason")]
     queue_dropped: Annotated[int, Meta(ge=0, description="observations dropped unread: the host's queue was full")]
     published: Annotated[int, Meta(ge=0, description="PoseArrays published")]
+    # Since issue 37 (still version 1: fields are only ever added); absent from older hosts.
+    health: Health | None = None
+    cameras: Annotated[list[CameraStatus], Meta(max_length=MAX_CAMERAS)] | None = None
 
 
 _ENCODER: Final = msgspec.json.Encoder()
@@ -73,6 +117,11 @@ _ENCODER: Final = msgspec.json.Encoder()
 def latency(p50: float, p99: float) -> Latency:
     """The status latency from two percentiles in ms; NaN (no sample yet) becomes null."""
     return Latency(p50=None if math.isnan(p50) else float(p50), p99=None if math.isnan(p99) else float(p99))
+
+
+def delay(p50_s: float, p95_s: float) -> Delay:
+    """A camera's delay from two percentiles in seconds; NaN (no frame yet) becomes null."""
+    return Delay(p50=None if math.isnan(p50_s) else float(p50_s) * 1e3, p95=None if math.isnan(p95_s) else float(p95_s) * 1e3)
 
 
 def _check(status: HostStatus) -> None:
@@ -96,6 +145,18 @@ def _check(status: HostStatus) -> None:
             bad(f"latency_ms.{field}", f"must be null or a finite number >= 0, got {v!r}")
     if type(status.rejected) is not dict or not all(type(k) is str and type(n) is int and n >= 0 for k, n in status.rejected.items()):
         bad("rejected", f"must map reason names to counts >= 0, got {status.rejected!r}")
+    if status.health is not None:
+        h = status.health
+        if h.state not in HEALTH_STATES or len(h.reasons) > MAX_REASONS or not all(type(r) is str and len(r) <= 512 for r in h.reasons):
+            bad("health", f"must be ok or degraded with at most {MAX_REASONS} reasons of up to 512 characters, got {h!r}")
+    for cam in status.cameras or ():
+        if not NAME_RE.fullmatch(cam.id) or cam.state not in CAMERA_STATES or (cam.fps is not None and not 0.0 <= cam.fps < math.inf):
+            bad("cameras", f"camera {cam.id!r}: id, state (one of {', '.join(CAMERA_STATES)}) or fps out of range")
+        for v in (cam.delay_ms.p50, cam.delay_ms.p95):
+            if v is not None and not 0.0 <= v < math.inf:
+                bad("cameras", f"camera {cam.id}: delay_ms must be null or finite >= 0, got {cam.delay_ms!r}")
+        if min(cam.frames, cam.fused, *cam.dropped.values(), 0) < 0 or len(cam.problems) > 16:
+            bad("cameras", f"camera {cam.id}: counters must be >= 0 and problems at most 16")
 
 
 def encode(status: HostStatus) -> bytes:

@@ -70,11 +70,6 @@ class TrackerConfig:
             height). The bearing comes from pixels: what is left is the calibration's and the
             detector's error. 0.08: dev.json's real sets (3 cameras) then have a view beyond
             3 sigmas in 0.3% of them; at 0.05, in 3.3%, and the live figures get worse.
-        restart_gap_s: a camera whose sequence number goes back is taken as restarted (its
-            frames are admitted again) after this long without frames from it, when the frame
-            after a refused one continues the new count, or after ``Tracker.reset_camera``;
-            otherwise such frames are dropped as "seq_backwards". A forged frame with a high
-            sequence number therefore costs a camera one real frame, never its view.
     """
 
     confirm_after_s: float = 2.0
@@ -92,7 +87,6 @@ class TrackerConfig:
     reid_window_s: float = 30.0
     reid_d_max: float = 0.6
     reid_speed_mps: float = 1.5
-    restart_gap_s: float = 1.0
     confirm_min_support: float = 0.5
     min_separation_m: float = 0.3
     same_body_sigmas: float = 3.0
@@ -115,7 +109,6 @@ class TrackerConfig:
         _check("reid_window_s", self.reid_window_s, 0.0, 3600.0)
         _check("reid_d_max", self.reid_d_max, 0.0, 1.0, lo_open=True)
         _check("reid_speed_mps", self.reid_speed_mps, 0.0, 100.0)
-        _check("restart_gap_s", self.restart_gap_s, 0.0, 600.0)
         _check("confirm_min_support", self.confirm_min_support, 0.0, 1.0)
         _check("min_separation_m", self.min_separation_m, 0.0, 2.0)
         _check("same_body_sigmas", self.same_body_sigmas, 0.0, 100.0)

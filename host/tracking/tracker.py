@@ -26,11 +26,10 @@ and a person unseen for 2 s is removed. This one adds:
 - one person is one detection: skeletons of one frame whose shared joints nearly coincide
   (``association.duplicate_views``: a detector's double report, a flood of replayed copies) are
   one view, the one with the most joints (counted as ``duplicate_views``);
-- time from the messages: everything runs on capture stamps and an injected ``now_ns``. A
-  camera's frames are admitted in order (``Tracker.admit``, ``DROP_REASONS``): "late", "duplicate",
-  "seq_backwards" (a node restart is recognised: ``restart_gap_s``), "stale". A camera's ordering
-  reference is its newest admitted stamp capped at the host's clock, so a frame stamped in the
-  future (a skewed clock, a hostile peer) cannot make that camera's real frames "late";
+- time from the messages: everything runs on capture stamps. The frames come from the host's
+  timeline (``host.timeline``), which admits each frame once and releases them in capture order
+  across all cameras, so the tracker sees the world in the order it happened. It refuses only
+  frames that are not the site's ("wrong_site", "unknown_camera");
 - a cap on tracks (``max_tracks``, at most what a PoseArray may carry): confirmed people are
   never evicted for newcomers; when the tracker is full, a view that would start a candidate
   replaces the stalest candidate not seen in this frame, or, if there is none, is ignored
@@ -55,7 +54,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Final, NamedTuple, cast
+from typing import cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -70,28 +69,14 @@ from superbody.host.tracking.motion import _NS_PER_S, fuse_positions, predict_po
 from superbody.host.tracking.reid import REID_MARGIN, Lost, remembered_as
 from superbody.host.tracking.track import _BINS, StampedView, Track
 
-__all__ = ["Tracker", "DROP_REASONS"]
+__all__ = ["Tracker"]
 
 # A cue we cannot compute (empty histogram, no ground point) costs this much, normalised.
 _UNKNOWN_COST = 0.5
 
 
-class _Order(NamedTuple):
-    """A camera's frame order: the reference a next frame must not be older than, and its newest frame."""
-
-    ref_ns: int  # newest admitted stamp, capped at the host's clock when it was admitted
-    stamp_ns: int  # stamp of the newest admitted frame
-    seq: int  # its sequence number
-    back_seq: int | None = None  # the last frame refused as seq_backwards since: its seq ...
-    back_ns: int = 0  # ... and stamp
-
-
-# Why ``Tracker.admit`` refuses a frame, in the order checked.
-DROP_REASONS: Final[tuple[str, ...]] = ("wrong_site", "unknown_camera", "stale", "late", "duplicate", "seq_backwards")
-
 _STATS = (
-    "observations", "views", "late_dropped", "duplicate_dropped", "stale_dropped", "seq_backwards_dropped", "wrong_site",
-    "unknown_camera", "too_few_joints", "track_cap", "evicted_candidates", "too_few_joints_new", "no_ground_point", "no_signature",
+    "observations", "views", "wrong_site", "unknown_camera", "too_few_joints", "track_cap", "evicted_candidates", "too_few_joints_new", "no_ground_point", "no_signature",
     "unplaced_new", "suppressed", "duplicate_views", "matched", "new_candidates", "confirmed", "removed", "dropped_candidates", "reidentified",
     "merged", "views_of_another_body",
 )
@@ -106,8 +91,7 @@ class Tracker:
         id_prefix: prepended to ids in ``Track.label``.
 
     Attributes:
-        stats: counters, e.g. ``late_dropped``, ``too_few_joints``, ``new_candidates``,
-            ``confirmed``, ``removed``.
+        stats: counters, e.g. ``too_few_joints``, ``new_candidates``, ``confirmed``, ``removed``.
     """
 
     def __init__(self, site: Site, config: TrackerConfig | None = None, id_prefix: str = "") -> None:
@@ -119,12 +103,10 @@ class Tracker:
         self._tracks: dict[int, Track] = {}
         self._lost: dict[int, Lost] = {}  # removed people, oldest first, for re-identification
         self._next_id = 1
-        self._order: dict[str, _Order] = {}  # per camera: what its next frame is judged against
         c = self.config
         self._confirm_ns = round(c.confirm_after_s * _NS_PER_S)
         self._remove_ns = round(c.remove_after_s * _NS_PER_S)
         self._gap_ns = round(c.confirm_max_gap_s * _NS_PER_S)
-        self._restart_ns = round(c.restart_gap_s * _NS_PER_S)
         self._reid_ns = round(c.reid_window_s * _NS_PER_S)
 
     @property
@@ -135,56 +117,29 @@ class Tracker:
     def track(self, track_id: int) -> Track | None:
         return self._tracks.get(track_id)
 
-    def admit(self, obs: Observation, now_ns: int | None = None) -> str | None:
-        """Why ``update`` would drop this frame (one of ``DROP_REASONS``), or None if it would use it.
-
-        Changes nothing; ``now_ns`` as in ``update``.
-        """
-        t = int(obs.stamp_ns)
-        now = t if now_ns is None else int(now_ns)
-        if obs.site != self.site.name:
-            return "wrong_site"
-        if obs.camera not in self._cameras:
-            return "unknown_camera"
-        if now - t >= self._remove_ns:
-            return "stale"
-        o = self._order.get(obs.camera)
-        if o is None:
-            return None
-        if t == o.stamp_ns or obs.seq == o.seq:
-            return "duplicate"
-        if t < o.ref_ns:
-            return "late"
-        restarted = t - o.stamp_ns >= self._restart_ns or (o.back_seq is not None and obs.seq == o.back_seq + 1 and t > o.back_ns)
-        if obs.seq < o.seq and not restarted:
-            return "seq_backwards"
-        return None
-
-    def reset_camera(self, camera: str) -> None:
-        """Forget a camera's frame order, e.g. when its node restarted (its liveliness token came back)."""
-        self._order.pop(camera, None)
-
-    def update(self, obs: Observation, now_ns: int | None = None) -> list[Match]:
+    def update(self, obs: Observation) -> list[Match]:
         """Match one camera frame's people to tracks.
 
-        The steps: admit the frame (its order against the camera's earlier frames), measure its
-        views (joints, ground points, colours), associate them with the tracks (each track's
-        position predicted to the frame's time), update the matched tracks, create candidates
-        from the views no track took, and fuse the ground points into the tracks' positions.
-        Removal is ``prune``'s.
+        Frames come in capture order (``host.timeline``). The steps: measure the frame's views
+        (joints, ground points, colours), associate them with the tracks (each track's position
+        predicted to the frame's time), update the matched tracks, create candidates from the
+        views no track took, and fuse the ground points into the tracks' positions. Removal is
+        ``prune``'s.
 
         Args:
             obs: one frame of one camera.
-            now_ns: the host's clock (UNIX ns); the frame's stamp by default. A frame already
-                older than ``remove_after_s`` could keep nobody alive and is dropped.
 
         Returns:
-            One ``Match`` per view of ``obs.people``, in order; empty when the frame was dropped
-            (``admit`` says why; ``stats`` counts each reason).
+            One ``Match`` per view of ``obs.people``, in order; empty when the frame is not the
+            site's (``stats`` counts "wrong_site" and "unknown_camera").
         """
         t = int(obs.stamp_ns)
-        if not self._admit_frame(obs, t, t if now_ns is None else int(now_ns)):
+        st = self.stats
+        st["observations"] += 1
+        if obs.site != self.site.name or obs.camera not in self._cameras:
+            st["wrong_site" if obs.site != self.site.name else "unknown_camera"] += 1
             return []
+        st["views"] += len(obs.people)
         tracks = [tr for tr in self._tracks.values() if t - tr.last_seen_ns < self._remove_ns]
         views = self._measure(obs) if obs.people else None
         matches: list[Match | None] = [None] * len(obs.people)  # the views left None at the end were ignored
@@ -198,23 +153,6 @@ class Tracker:
             fused += self._create(obs, t, views, tracks, rows, cols, near, matches)
             self._fuse(fused, views, t)
         return [Match(i, None, "ignored") if m is None else m for i, m in enumerate(matches)]
-
-    def _admit_frame(self, obs: Observation, t: int, now: int) -> bool:
-        """``admit`` the frame, count it, and keep the camera's ordering reference; False: dropped."""
-        st = self.stats
-        st["observations"] += 1
-        reason = self.admit(obs, now)
-        if reason is not None:
-            st[reason if reason in ("wrong_site", "unknown_camera") else f"{reason}_dropped"] += 1
-            if reason == "seq_backwards":  # remembered: if the next frame follows it, the node restarted
-                self._order[obs.camera] = self._order[obs.camera]._replace(back_seq=int(obs.seq), back_ns=t)
-            return False
-        # The stamp orders this camera's next frames, capped at the host's clock: a frame from
-        # the future is used, but cannot make the camera's real frames look late.
-        prev, ref = self._order.get(obs.camera), min(t, now)
-        self._order[obs.camera] = _Order(ref if prev is None else max(prev.ref_ns, ref), t, int(obs.seq))
-        st["views"] += len(obs.people)
-        return True
 
     def _measure(self, obs: Observation) -> FrameViews:
         """The frame's views with enough joints, and their ground points and colours."""

@@ -8,19 +8,21 @@ and predicts the pose on to the newest view's time). ``replay`` runs exactly tha
 clock injected:
 
 1. every view of every sample becomes an Observation encoded with ``edge.messages.wire``, as a camera
-   node would publish it: keypoints (u, v, score), the box around them
+   node would publish it (and a camera with no view in a sample publishes an empty frame then, as a
+   live node publishes every frame): keypoints (u, v, score), the box around them
    (``models.data.wtf.keypoint_bbox``), camera-frame 3D joints only when the estimator's graph uses
    them, and a colour signature. A WheresTheFellow recording has no colour: each view gets the
    same constant synthetic signature (``SIGNATURE``, a flat hue-saturation histogram), so colour
    never tells views apart and the tracker matches on geometry (one person in the recording);
 2. the observations are fed in capture-time order, each at its own capture time; views with the
    same time stamp form one batch (one ingest each), and the host steps after each batch, as the
-   live host does after draining its queue (``Aggregator.ingest``, ``Aggregator.step``; zero
-   latency: the host's clock reads the batch's capture time);
+   live host does after draining its queue (``Aggregator.ingest``, ``Aggregator.step``; the
+   cameras deliver at once: the host's clock reads the batch's capture time);
 3. each sample is scored at its capture time (its first, earliest view's stamp, as
-   ``models.data.wtf`` defines it, which is also its truth's time): the PoseArray of the step after
-   the batch holding that view, so the host has seen every view captured up to then and none
-   captured later. The sample's other views, captured a few milliseconds (at most about 0.2 s
+   ``models.data.wtf`` defines it, which is also its truth's time): on the first PoseArray as of
+   that time or later (``Aggregator.as_of_ns``, the host's watermark: it fuses every camera up to
+   it, in capture order), so the host has seen every view captured up to then (and, as live, the
+   views of that sample's slower cameras, up to about 0.2 s later in dev.json). The sample's other views, captured a few milliseconds (at most about 0.2 s
    in dev.json) later, count for the next sample; the per-frame estimate does use them.
    ``at="last"`` scores once the sample's last view is in instead (the same views as the
    per-frame estimate, but a pose up to that much younger than the truth).
@@ -143,6 +145,7 @@ def observation_batches(
     site: Site,
     with_3d: bool = False,
     signature: NDArray | None = SIGNATURE,
+    empty_frames: bool = True,
 ) -> list[tuple[int, list[tuple[str, bytes]]]]:
     """Every view as the (key, payload) a camera node would publish, batched by capture time.
 
@@ -152,6 +155,10 @@ def observation_batches(
         site: the site (its name and image sizes go into each Observation).
         with_3d: send the views' camera-frame 3D joints (``PersonView.points3d``).
         signature: the colour histogram every view carries; None keeps each view's own.
+        empty_frames: a camera with no view in a sample publishes an empty frame at the sample's
+            time (its first view's), as a live node publishes every frame: the host's watermark
+            waits for every camera (``host.timeline``), so a camera that sent nothing would hold
+            it back. False: only the views.
 
     Returns:
         ``(stamp_ns, [(key, payload), ...])`` in increasing time; within a batch, in the site's
@@ -163,7 +170,7 @@ def observation_batches(
     """
     if len(stamps) != len(samples):
         raise ValueError(f"observation_batches: {len(stamps)} stamp sets for {len(samples)} samples")
-    events: dict[tuple[int, str], tuple[int, PersonView]] = {}
+    events: dict[tuple[int, str], tuple[int, PersonView | None]] = {}
     for i, (s, st) in enumerate(zip(samples, stamps)):
         if set(st) != set(s.views):
             raise ValueError(f"sample {i}: stamps for cameras {sorted(st)}, views from cameras {sorted(s.views)}")
@@ -174,14 +181,19 @@ def observation_batches(
             if key in events:
                 raise ValueError(f"sample {i}: camera {cam} has another view with the same stamp (sample {events[key][0]})")
             events[key] = (i, view)
+        if empty_frames:  # a live node publishes every frame, also when its detector found nobody
+            first = min(int(t) for t in st.values())
+            for cam in site.camera_ids:
+                if cam not in st and (first, cam) not in events:
+                    events[first, cam] = (i, None)
     order = sorted(events, key=lambda k: (k[0], site.camera_index(k[1])))
     seq = dict.fromkeys(site.camera_ids, 0)
     batches: list[tuple[int, list[tuple[str, bytes]]]] = []
     for stamp, cam in order:
-        i, view = events[(stamp, cam)]
+        i, shown = events[(stamp, cam)]
         c = site.camera(cam)
         obs = Observation(site=site.name, camera=cam, seq=seq[cam], stamp_ns=stamp, width=c.width, height=c.height,
-                          people=(_wire_view(view, with_3d, signature),))
+                          people=() if shown is None else (_wire_view(shown, with_3d, signature),))
         seq[cam] += 1
         try:
             payload = wire.encode(obs)
@@ -245,19 +257,24 @@ def replay(
     when = [pick(int(t) for t in st.values()) for st in stamps]  # (N,) scoring times
     due = sorted(range(n), key=lambda i: when[i])
     k = 0
-    for b, (stamp, batch) in enumerate(batches):
+    # The host fuses in capture time, up to its watermark (host.timeline): a sample is scored on the
+    # first PoseArray as of its time or later. A last step once every camera would have delivered
+    # (max_delay_s after the last frame) lets the watermark pass the last samples.
+    last = batches[-1][0] if batches else 0
+    steps = [(stamp, batch) for stamp, batch in batches] + [(last + round(config.max_delay_s * 1e9) + 1, [])]
+    for stamp, batch in steps:
         for key, payload in batch:
             agg.ingest(payload, key, stamp)
         arr = agg.step(stamp)
-        nxt = batches[b + 1][0] if b + 1 < len(batches) else math.inf
-        # Every sample due before the next batch is scored on this PoseArray.
-        while k < n and when[due[k]] < nxt:
+        as_of = agg.as_of_ns
+        assert as_of is not None
+        while k < n and when[due[k]] <= as_of:
             i = due[k]
             k += 1
             people[i] = len(arr.people)
             if not arr.people:
                 continue
-            seen = [(cam, int(t)) for cam, t in stamps[i].items() if int(t) <= stamp]
+            seen = [(cam, int(t)) for cam, t in stamps[i].items() if int(t) <= as_of]
             holds = [sum(_holds(agg, p.id, cam, t) for cam, t in seen) for p in arr.people]
             if max(holds) > 0:
                 j, source[i] = int(np.argmax(holds)), "track"

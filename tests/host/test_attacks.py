@@ -252,3 +252,76 @@ def test_a_peer_cannot_map_its_shared_memory_into_the_host(processes):
         assert _shm_maps(host.pid) == [], "the host mapped a peer's shared memory"
         assert host.poll() is None
         sub.undeclare()
+
+
+class _StallingClock(WorldClock):
+    """The wall clock, but ``stall()`` makes it jump ahead: as a host process frozen (SIGSTOP) or
+    starved for that long sees it when it runs again."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        object.__setattr__(self, "_ahead", [0])
+
+    def stall(self, seconds: float) -> None:
+        self._ahead[0] += int(seconds * 1e9)  # type: ignore[attr-defined]
+
+    def now_ns(self) -> int:
+        return super().now_ns() + self._ahead[0]  # type: ignore[attr-defined]
+
+
+class _StallsOnce:
+    """Geometry that stalls the host's clock by 5 s inside its n-th estimate: the host froze mid-step."""
+
+    def __init__(self, clock: _StallingClock, n: int) -> None:
+        self._inner, self._clock, self._left = AnalyticEstimator(SITE), clock, n
+
+    def estimate(self, view_sets):
+        self._left -= 1
+        if self._left == 0:
+            self._clock.stall(5.0)
+        return self._inner.estimate(view_sets)
+
+
+def test_a_pose_array_computed_before_a_stall_is_never_published_after_it():
+    """Issue 37: a host frozen for 5 s sometimes published, once it resumed, an array computed
+    before the freeze (positions 5 s old). A step the clock overtook by more than STALL_S is
+    dropped and counted ("stalled"); the next array is computed afresh."""
+    clock = _StallingClock()
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    agg = Aggregator(SITE, _StallsOnce(clock, n=20), "analytic", HostConfig(status_every_s=0.5))
+    published: list[tuple[int, object]] = []
+    cv = threading.Condition()
+
+    def on(arr) -> None:
+        with cv:
+            published.append((clock.now_ns(), arr))
+            cv.notify_all()
+
+    stop = threading.Event()
+    conf = transport.session_config("peer", connect=[], listen=[endpoint])
+    host = threading.Thread(target=lambda: run_host(conf, agg, clock, stop, sinks=[CallbackSink(on)]), daemon=True)
+    host.start()
+    world = World(SITE, 2, seed=1)
+    cams = [SimCamera(world, c) for c in SITE.camera_ids]
+    try:
+        with _attacker(endpoint) as camera_session:
+            pubs = [camera_session.declare_publisher(transport.observation_key(SITE.name, c.camera.id)) for c in cams]
+            _wait_matched(*pubs)
+            for k in range(200):  # bounded: 200 frames per camera, 15 fps, until the stall happened and 30 arrays after it
+                for cam, pub in zip(cams, pubs):
+                    pub.put(wire.encode(replace_seq(cam.observe(clock.now_ns())[0], k)))
+                time.sleep(1 / 15)
+                with cv:
+                    if agg.rejected.get("stalled") and sum(1 for t, a in published if a.stamp_ns > t - 10**9) > 30:
+                        break
+    finally:
+        stop.set()
+        host.join(timeout=20)
+    assert agg.rejected.get("stalled") == 1, agg.rejected
+    stale = [(t - a.stamp_ns) / 1e9 for t, a in published if t - a.stamp_ns > 0.5e9]
+    assert stale == [], f"published {len(stale)} arrays computed {max(stale):.1f} s before"
+    assert len(published) > 30
+
+
+def replace_seq(obs, seq: int):
+    return obs.__class__(obs.site, obs.camera, seq, obs.stamp_ns, obs.width, obs.height, obs.people)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import time
 
+import numpy as np
 import pytest
 import zenoh
 
@@ -65,20 +66,78 @@ def test_malformed_payloads_are_counted_and_the_host_keeps_publishing(processes)
             "range": json.dumps({**good, "image": [640, 10**6]}).encode(),
             "unknown_camera": json.dumps({**good, "camera": "42"}).encode(),
         }
-        for _ in range(20):  # bounded: 100 bad payloads
+        rounds = 10
+        for _ in range(rounds):  # bounded: 50 bad payloads, paced: camera 1 may send 2 x its 15 fps, it sends 15 itself
             for reason, payload in bad.items():
                 cam = "42" if reason == "unknown_camera" else "1"
                 # blocking: Zenoh's default (DROP) may drop puts on a loaded machine, and this
                 # test is about the host's counting, not the network's
                 session.put(transport.observation_key(site.name, cam), payload, congestion_control=zenoh.CongestionControl.BLOCK)
-        time.sleep(0.2)
+            time.sleep(0.4)
         n_before = len(watch.arrays)
 
         def all_counted() -> bool:
-            return bool(watch.status) and all(watch.status[-1]["rejected"].get(r, 0) >= 20 for r in bad)
+            return bool(watch.status) and all(watch.status[-1]["rejected"].get(r, 0) >= rounds for r in bad)
 
         assert watch.wait(all_counted, timeout=20), watch.status[-1]["rejected"] if watch.status else None
         # Still publishing people from the real cameras afterwards.
         assert watch.wait(lambda: len(watch.arrays) > n_before + 20 and watch.arrays[-1].people, timeout=20)
+        for s in watch.subs:
+            s.undeclare()
+
+
+def test_a_flood_on_one_camera_key_never_stops_the_host_nor_the_other_cameras(processes):
+    """Issue 37: 2,000 valid-looking frames a second on one camera's key, on a loaded machine,
+    silenced the host for 12 s (it drained its whole queue before it published, and the flood
+    pushed the other cameras' frames out of the one queue). Now the flood is cut at camera 1's
+    rate limit before it is decoded, every camera has a queue of its own, a tick's work is
+    bounded and the status goes out on its own schedule."""
+    port = free_port()
+    site = load_site(SITE)
+    conf = transport.session_config("peer", connect=[], listen=[f"tcp/127.0.0.1:{port}"])
+    with zenoh.open(conf) as session:
+        watch = HostWatch(session, site.name)
+        processes.start("host", "run", "--site", SITE, "--estimator", "analytic", "--status-every", "0.5",
+                        "--connect", f"tcp/127.0.0.1:{port}")
+        for cam in site.camera_ids:
+            processes.start("edge", "run", "--site", SITE, "--camera", cam, "--seed", "3", "--people", "3",
+                            "--connect", f"tcp/127.0.0.1:{port}")
+        seen_by_others = lambda a: any({"2", "3"} & set(p.cameras) for p in a.people)  # noqa: E731
+        assert watch.wait(lambda: sum(map(seen_by_others, watch.arrays[-20:])) >= 10, timeout=40), "the host never fused cameras 2 and 3"
+        doc = json.loads(wire.encode(SimCamera(World(site, 2, seed=3), "1").observe(time.time_ns())[0]))
+        pub = session.declare_publisher(transport.observation_key(site.name, "1"))
+        with watch.cv:
+            before = watch.status[-1]
+        t0 = time.monotonic()
+        sent = 0
+        while time.monotonic() - t0 < 5.0 and sent < 12_000:  # bounded: 5 s at 2,000 frames a second
+            for _ in range(20):
+                pub.put(json.dumps({**doc, "seq": 10**6 + sent, "stamp_ns": time.time_ns()}))
+                sent += 1
+            ahead = t0 + sent / 2000 - time.monotonic()
+            if ahead > 0:
+                time.sleep(ahead)
+        t1 = time.monotonic()
+        assert watch.wait(lambda: len(watch.status_arrived) and watch.status_arrived[-1] > t1 + 0.2, timeout=10)
+        pub.undeclare()
+        with watch.cv:
+            times = [t for t in watch.arrived if t0 <= t <= t1]
+            arrays = [a for a, t in zip(watch.arrays, watch.arrived) if t0 + 1.0 <= t <= t1]
+            status_times = [t for t in watch.status_arrived if t0 <= t <= t1 + 0.5]
+            after = watch.status[-1]
+        print(f"sent {sent} frames in {t1 - t0:.1f} s; {len(times)} pose arrays, {len(status_times)} status messages; "
+              f"{sum(map(seen_by_others, arrays))} of {len(arrays)} with cameras 2 or 3")
+        assert sent >= 5_000, "the flood was not a flood"
+        gaps = np.diff([t0, *times, t1])
+        assert gaps.max() < 1.0, f"no pose array for {gaps.max():.1f} s during the flood"
+        assert np.diff([t0, *status_times]).max() < 1.5  # every 0.5 s, give or take a tick
+        # The other cameras' frames all came through (15 fps each) and their views went into the poses.
+        cams = [{c["id"]: c for c in st["cameras"]} for st in (before, after)]
+        for cam in ("2", "3"):
+            assert cams[1][cam]["frames"] - cams[0][cam]["frames"] >= 0.8 * 15 * (t1 - t0), (cam, cams[0][cam], cams[1][cam])
+        assert sum(cams[1][c]["fused"] - cams[0][c]["fused"] for c in ("2", "3")) >= 15 * (t1 - t0)
+        assert sum(map(seen_by_others, arrays)) >= 0.5 * len(arrays)
+        assert cams[1]["1"]["dropped"].get("over_rate", 0) > 0.8 * sent and after["health"]["state"] == "degraded"
+        assert any(r.startswith("camera 1: over_rate") for r in after["health"]["reasons"]), after["health"]
         for s in watch.subs:
             s.undeclare()

@@ -12,9 +12,17 @@ from superbody.edge.messages.payload import REASONS, DecodeError
 from superbody.host.messages import status as hs
 
 
+def make_camera(**change) -> hs.CameraStatus:
+    fields = dict(id="3", alive=True, state="too_late", fps=14.9, delay_ms=hs.delay(1.9, 2.3), frames=300, fused=0,
+                  dropped={"too_late": 300}, problems=["too_late: frames arrive 2.30 s after capture (p95)"])
+    return hs.CameraStatus(**{**fields, **change})
+
+
 def make_status(**change) -> hs.HostStatus:
     fields = dict(cameras_alive=["1", "2"], cameras_total=3, people=2, obs_per_s=44.9, latency_ms=hs.latency(1.84, 3.9),
-                  rejected={"late": 2}, queue_dropped=0, published=431)
+                  rejected={"late": 2}, queue_dropped=0, published=431,
+                  health=hs.Health(state="degraded", reasons=["camera 3: too_late: frames arrive 2.30 s after capture (p95)"]),
+                  cameras=[make_camera()])
     return hs.HostStatus(**{**fields, **change})
 
 
@@ -37,8 +45,18 @@ def test_round_trip_and_field_order() -> None:
     status = make_status()
     payload = hs.encode(status)
     assert list(_strict_loads(payload)) == ["cameras_alive", "cameras_total", "people", "obs_per_s", "latency_ms", "rejected",
-                                             "queue_dropped", "published"]
+                                             "queue_dropped", "published", "health", "cameras"]
     assert hs.decode(payload) == status
+    cam = _strict_loads(payload)["cameras"][0]
+    assert list(cam) == ["id", "alive", "state", "fps", "delay_ms", "frames", "fused", "dropped", "problems"]
+
+
+def test_a_status_of_a_host_before_issue_37_still_decodes() -> None:
+    # health and cameras came later, in version 1: a subscriber reads an older host's status too.
+    doc = json.loads(hs.encode(make_status()))
+    del doc["health"], doc["cameras"]
+    old = hs.decode(json.dumps(doc).encode())
+    assert old.health is None and old.cameras is None
 
 
 def test_decoder_ignores_fields_it_does_not_know() -> None:
@@ -59,6 +77,9 @@ def test_decoder_ignores_fields_it_does_not_know() -> None:
         ({"cameras_alive": ["1", "1"]}, "cameras_alive"),             # repeated camera
         ({"cameras_alive": ["a b"]}, "cameras_alive"),                # outside the key alphabet
         ({"rejected": {"late": -2}}, "rejected"),
+        ({"health": hs.Health(state="fine", reasons=[])}, "health"),                        # ok or degraded only
+        ({"cameras": [make_camera(state="sleepy")]}, "cameras"),                          # a state it does not have
+        ({"cameras": [make_camera(delay_ms=hs.Delay(p50=-1.0, p95=None))]}, "cameras"),  # a negative delay
         ({"published": 1.0}, "published"),                            # a float for a counter
     ],
 )
