@@ -4,8 +4,11 @@ Subscribes to the site's PoseArrays and host status on Zenoh and serves a Foxglo
 (``ws://127.0.0.1:8765`` by default; in Foxglove: Open connection, Foxglove WebSocket) with:
 
 - ``/superbody/scene`` (``foxglove.SceneUpdate``): the floor polygon, the obstacles, each camera's
-  frustum (from the site file, re-sent every second for late joiners), and each person as an
-  arrow along their torso yaw with a label "id yaw" (each person lives 0.5 s unless renewed).
+  frustum (from the site file, re-sent every second for late joiners), each person as an
+  arrow along their torso yaw with a label "id yaw" (each person lives 0.5 s unless renewed),
+  and the host's health from its status: "host ok" or "host degraded" with the first reasons,
+  above the floor, and under each camera its state and delivery delay, green when it is fine
+  and red when not (``health_scene``).
 - ``superbody/<site>/people``: the raw PoseArray (JSON, its JSON Schema).
 - ``superbody/<site>/host/status``: the raw host status (JSON, its JSON Schema).
 
@@ -30,8 +33,9 @@ from superbody.edge.camera import Camera, pixel_to_ray
 from superbody.edge.resources import json_schema
 from superbody.edge.site import Site
 from superbody.host.messages import pose as pose_msg
+from superbody.host.messages import status as host_status
 
-__all__ = ["SCENE_TOPIC", "frustum_points", "floor_points", "static_scene", "people_scene", "run_view"]
+__all__ = ["SCENE_TOPIC", "frustum_points", "floor_points", "static_scene", "people_scene", "health_texts", "health_scene", "run_view"]
 
 log = logging.getLogger("superbody.view")
 
@@ -131,6 +135,39 @@ def people_scene(arr: pose_msg.PoseArray):
     return SceneUpdate(entities=entities)
 
 
+def health_texts(site: Site, status: host_status.HostStatus) -> list[tuple[str, tuple[float, float, float], str, bool]]:
+    """What ``health_scene`` draws: (entity id, where, text, fine) for the host's health (above the
+    floor's centre: its state and first three reasons) and for each camera (under it: its state
+    and median delivery delay)."""
+    floor = np.asarray(site.floor, dtype=np.float64)
+    cx, cy = floor.mean(axis=0) if len(floor) else (0.0, 0.0)
+    health = status.health
+    fine = health is None or health.state == "ok"
+    out = [("host-health", (float(cx), float(cy), 2.8), "\n".join(["host ok" if fine else "host degraded", *(health.reasons[:3] if health else [])]),
+            fine)]
+    where = {c.id: c.position for c in site.cameras}
+    for cam in status.cameras or ():
+        if cam.id in where:
+            delay = "" if cam.delay_ms.p50 is None else f" {cam.delay_ms.p50 / 1e3:.2f} s late"
+            x, y, z = map(float, where[cam.id])
+            out.append((f"camera-state-{cam.id}", (x, y, z - 0.25), f"{cam.state}{delay}", cam.state == "ok"))
+    return out
+
+
+def health_scene(site: Site, status: host_status.HostStatus, stamp_ns: int):
+    """The host status's health as scene text (``health_texts``), green where fine and red where not."""
+    from foxglove.messages import Color, SceneEntity, SceneUpdate, TextPrimitive
+
+    ts = _stamp(stamp_ns)
+    good, bad = Color(r=0.2, g=0.85, b=0.3, a=1.0), Color(r=1.0, g=0.25, b=0.2, a=1.0)
+    return SceneUpdate(entities=[
+        SceneEntity(timestamp=ts, frame_id=site.name, id=eid, texts=[TextPrimitive(
+            pose=_pose(*xyz), billboard=True, font_size=14.0 if eid == "host-health" else 12.0, scale_invariant=True,
+            color=good if fine else bad, text=text)])
+        for eid, xyz, text, fine in health_texts(site, status)
+    ])
+
+
 def run_view(conf, site: Site, host: str, port: int, stop: threading.Event, ready: threading.Event | None = None) -> dict:
     """Serve the live view until ``stop`` is set; returns counts of what was forwarded."""
     import foxglove
@@ -159,8 +196,15 @@ def run_view(conf, site: Site, host: str, port: int, stop: threading.Event, read
         counts["people"] += 1
 
     def on_status(sample) -> None:
-        status.log(sample.payload.to_bytes(), log_time=time.time_ns())
+        raw, now = sample.payload.to_bytes(), time.time_ns()
+        status.log(raw, log_time=now)
         counts["status"] += 1
+        try:
+            scene.log(health_scene(site, host_status.decode(raw), now), log_time=now)
+        except ValueError as e:  # DecodeError: the raw status went out as it came; the scene skips it
+            counts["rejected"] += 1
+            if counts["rejected"] <= 3:
+                log.warning("host status not shown in the scene: %s", e)
 
     try:
         with zenoh.open(conf) as session:

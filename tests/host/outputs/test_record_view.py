@@ -157,3 +157,25 @@ def test_view_bad_arguments_are_one_line_errors(processes, args, text):
     assert p.wait(timeout=30) == 2
     err = p.stderr.read()
     assert text in err and "Traceback" not in err, err
+
+
+def test_the_scene_shows_the_hosts_health_and_each_cameras_state():
+    from superbody.host.messages import status as hs
+    from superbody.host.outputs.view import health_scene, health_texts
+
+    site = load_site(SITE)
+    cams = [hs.CameraStatus(id=c.id, alive=True, state="ok", fps=15.0, delay_ms=hs.delay(0.12, 0.2), frames=10, fused=9, dropped={},
+                            problems=[]) for c in site.cameras]
+    cams[1] = hs.CameraStatus(id=cams[1].id, alive=True, state="too_late", fps=15.0, delay_ms=hs.delay(2.3, 2.5), frames=0, fused=0,
+                              dropped={"too_late": 300}, problems=["too_late: frames arrive 2.50 s after capture (p95)"])
+    status = hs.HostStatus(cameras_alive=[c.id for c in site.cameras], cameras_total=len(site.cameras), people=1, obs_per_s=45.0,
+                           latency_ms=hs.latency(150.0, 200.0), rejected={}, queue_dropped=0, published=100,
+                           health=hs.Health(state="degraded", reasons=[f"camera {cams[1].id}: {cams[1].problems[0]}"]), cameras=cams)
+    texts = {eid: (text, fine) for eid, _, text, fine in health_texts(site, status)}
+    assert texts["host-health"][0].startswith("host degraded\ncamera 2: too_late") and not texts["host-health"][1]
+    assert texts["camera-state-2"] == ("too_late 2.30 s late", False)
+    assert texts["camera-state-1"] == ("ok 0.12 s late", True)
+    assert b"too_late 2.30 s late" in health_scene(site, status, time.time_ns()).encode()  # what Foxglove gets
+    older = hs.HostStatus(**{f: getattr(status, f) for f in ("cameras_alive", "cameras_total", "people", "obs_per_s", "latency_ms",
+                                                            "rejected", "queue_dropped", "published")})
+    assert [t[:3:2] for t in health_texts(site, older)] == [("host-health", "host ok")]  # a host before issue 37
