@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -9,9 +10,10 @@ import pytest
 
 from superbody.edge.camera import Camera, look_at_rotation
 from superbody.edge.cli import main
+from superbody.edge.floor import guess_layout, polygon_area, visible_floor
 from superbody.edge.site import Site, dump_site, load_site
 from superbody.edge.site_check import check_camera, check_site, fov_deg, pitch_deg
-from tests.conftest import WTF_SITE
+from tests.conftest import ROOT, WTF_SITE
 
 
 def _cam(pos=(0.0, 0.0, 2.5), target=(4.0, 0.0, 1.0), **kw) -> Camera:
@@ -85,3 +87,23 @@ def test_floor_plot_command(tmp_path):
     out = tmp_path / "plots" / "floor.png"
     assert main(["site", "floor-plot", str(tmp_path / "one.toml"), "--out", str(out)]) == 0
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 20_000
+
+
+def _install_md_sites() -> list[str]:
+    text = (ROOT / "docs" / "install.md").read_text()
+    return re.findall(r"```toml\n(.*?)```", text, re.S)
+
+
+@pytest.mark.parametrize("text, layout", list(zip(_install_md_sites(), ("wall", "ring", "ceiling"))))
+def test_the_install_guides_example_sites_load_and_pass_the_checks(tmp_path, text, layout):
+    (tmp_path / "s.toml").write_text(text)
+    site = load_site(tmp_path / "s.toml")
+    assert check_site(site) == []
+    assert guess_layout(site.cameras) == layout
+    if layout != "wall":  # the ring's and the ceiling's polygons are the derived ones, as the guide says
+        derived = visible_floor(site.cameras, layout=layout)
+        assert polygon_area(derived) == pytest.approx(polygon_area(site.floor), rel=0.05)
+
+
+def test_the_install_guide_has_the_three_layouts():
+    assert len(_install_md_sites()) == 3
