@@ -90,7 +90,7 @@ def _fps(src: SourceCamera, fps: float | None) -> tuple[float, str]:
         note = "" if fps is None or fps == src.fps else f"; --fps {fps:g} not used"
         return src.fps, f"from {src.where.split(' ')[0]}{note}"
     if fps is None:
-        return DEFAULT_FPS, "the default; --fps sets it"
+        return DEFAULT_FPS, f"the default {DEFAULT_FPS:g} fps; --fps sets it"
     return fps, "from --fps"
 
 
@@ -147,7 +147,8 @@ def import_site(
         raise ImportFailure(_which_source(str(e), sources)) from None
     early = [f for i, c in enumerate(site.cameras) for f in _pose_errors(site, i)]
     chosen = guess_layout(site.cameras) if layout == "auto" else layout
-    assumed = [f"world: {frame.describe()}", f"floor: {'guessed' if layout == 'auto' else '--layout'} layout {chosen}"]
+    assumed = [f"world: {frame.describe()}", _tally("image size", [f for f, _ in result_cams]),
+               _tally("fps", [f for _, f in result_cams]), f"floor: {'guessed' if layout == 'auto' else '--layout'} layout {chosen}"]
     if early:  # no floor can be derived for cameras under it
         return ImportResult(site, "", chosen, assumed, [], early)
     try:
@@ -176,6 +177,15 @@ def import_site(
     result.assumed.append(f"floor polygon: {len(site.floor)} corners, {polygon_area(site.floor):.1f} m^2, {100 * two:.0f}% of it seen by "
                           "two or more cameras")
     return result
+
+
+def _tally(what: str, sources: Sequence[str]) -> str:
+    """``image size: from the files for 4 cameras, from --size for 1``: where a field came from."""
+    counts: dict[str, int] = {}
+    for src in sources:
+        key = "from the files" if src.startswith("from ") and not src.startswith(("from --",)) else src.split(";")[0]
+        counts[key] = counts.get(key, 0) + 1
+    return f"{what}: " + ", ".join(f"{k} for {n} camera{'s' if n > 1 else ''}" for k, n in counts.items())
 
 
 def _pose_errors(site: Site, index: int) -> list[Finding]:

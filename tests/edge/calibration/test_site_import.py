@@ -86,7 +86,8 @@ def test_the_report_says_what_it_assumed(tmp_path, capsys):
     assert rc == 0
     assert "0.01 m per source unit" in out and "z = -y (up)" in out and "floor at source y = 150" in out  # unit, up axis, floor
     assert "1920 x 1080 px (from dome0.yaml)" in out  # where the image size came from
-    assert "15 fps (the default; --fps sets it)" in out  # the fps default
+    assert "15 fps (the default 15 fps; --fps sets it)" in out and "fps: the default 15 fps for 5 cameras" in out  # the fps default
+    assert "image size: from the files for 5 cameras" in out
     assert "layout ring" in out and "reprojection against the source" in out
     text = (tmp_path / "imported.toml").read_text()
     assert text.startswith("# Site imported: imported by superbody site import from dome0.yaml")
