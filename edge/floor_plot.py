@@ -70,7 +70,8 @@ def plot_floor(site: Site, out: Path, cell_m: float = 0.05, dpi: int = 110) -> P
     views = seen.sum(0)
 
     span = max(x1 - x0, y1 - y0)
-    fig, ax = plt.subplots(figsize=(10.5, 10.5 * (y1 - y0) / max(x1 - x0, 1e-6) * 0.85 + 1.0), dpi=dpi)
+    height = float(np.clip(9.0 * (y1 - y0) / max(x1 - x0, 1e-6) + 1.5, 6.0, 16.0))  # inches: the plot's aspect, a legend below
+    fig, ax = plt.subplots(figsize=(10.5, height), dpi=dpi)
     top = max(2, int(views.max()))
     cmap = ListedColormap(plt.get_cmap("Greys")(np.linspace(0.12, 0.7, top)))  # 1 camera: light grey, none: white
     norm = BoundaryNorm(np.arange(0.5, top + 1.5), top)

@@ -81,14 +81,23 @@ class SourceCamera:
     notes: tuple[str, ...] = ()
 
 
-def line_of(text: str, key: str) -> int:
-    """The 1-based line of the first ``key:`` (or ``"key":``) in a YAML or JSON text, else 0."""
-    m = re.search(rf'(?:^|[\s{{,-])"?{re.escape(key)}"?\s*:', text, re.MULTILINE)
+def line_of(text: str, key: str, after: int = 0) -> int:
+    """The 1-based line of the first ``key:`` (or ``"key":``) in a YAML or JSON text at or after
+    line ``after``, else 0."""
+    start = 0
+    for _ in range(max(after - 1, 0)):
+        start = text.find("\n", start) + 1
+        if start == 0:
+            return 0
+    m = re.compile(rf'(?:^|[\s{{,-])"?{re.escape(key)}"?\s*:', re.MULTILINE).search(text, start)
     return text.count("\n", 0, m.end()) + 1 if m else 0
 
 
 def _at(path: Path, text: str, key: str) -> str:
-    line = line_of(text, key.split(".")[-1])
+    """``file:line: key`` for a dotted key (``cam1.camera_matrix``: the field after its camera's line)."""
+    *parents, last = key.split(".")
+    after = line_of(text, parents[0]) if parents and "[" not in parents[0] else 0
+    line = line_of(text, last, after)
     return f"{path.name}:{line}: {key}" if line else f"{path.name}: {key}"
 
 

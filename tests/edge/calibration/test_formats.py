@@ -178,3 +178,10 @@ def test_parse_transform(text, ok):
     else:
         with pytest.raises(ImportFailure, match="--T-cam0-world"):
             parse_transform(text)
+
+
+def test_an_error_in_the_second_camera_of_a_file_names_its_line(tmp_path):
+    path = tmp_path / "pair.yaml"
+    path.write_text(TWO.replace("  rvec: [0, 0.1, 0]\n", "  rvec: [0, 0.1]\n"))
+    with pytest.raises(ImportFailure, match=r"pair.yaml:11: right.rvec must be 3 numbers, got shape \(2,\)"):
+        read_matrices([path])
