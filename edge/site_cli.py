@@ -150,7 +150,7 @@ def import_main(args: argparse.Namespace) -> int:
     if not result.ok:
         errors = [f for f in result.findings if f.severity == "error"]
         hint = ""
-        if all("not above the floor" in f.message for f in errors):
+        if len(errors) == len(result.site.cameras) and all("not above the floor" in f.message for f in errors):
             hint = " (every camera under the floor: is --up's sign the other way, or --floor-at on the other side?)"
         more = f" (and {len(errors) - 1} more above)" if len(errors) > 1 else ""
         return _fail("import", f"{errors[0].field}: {errors[0].message}{hint}{more}; {args.out} not written")
