@@ -14,7 +14,7 @@ import re
 import sys
 from importlib.metadata import entry_points
 
-from superbody.edge import transport
+from superbody.edge import site_cli, transport
 from superbody.edge.cli_args import add_clock_args, add_session_args, clock_from_args, config_from_args, int_in, positive, stop_on_signals
 from superbody.edge.detectors import DETECTOR_FORMS, DetectorSpec, parse_detector
 from superbody.edge.detectors.base import DetectorError
@@ -78,9 +78,10 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    """Add the edge package's commands: ``edge run``, ``router``."""
+    """Add the edge package's commands: ``edge run``, ``router``, ``site``."""
     _register_node(sub)
     _register_router(sub)
+    site_cli.register(sub)
 
 
 if __name__ == "__main__":

@@ -28,7 +28,9 @@ Example::
     # or, instead of rotation:  look_at = [0.0, 0.0, 1.0]
 
 ``load_site`` returns frozen dataclasses; any invalid file raises ``SiteError`` naming the
-field and what is allowed.
+field and what is allowed. Every field, what it is for, its unit and range, and example sites
+for wall, ring and ceiling layouts: docs/install.md, "Site files". A calibration from another
+tool becomes a site with ``superbody site import`` (edge/calibration/site_import.py).
 """
 
 from __future__ import annotations

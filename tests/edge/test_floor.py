@@ -9,8 +9,11 @@ from superbody.edge.camera import Camera, look_at_rotation
 from superbody.edge.floor import (
     MIN_PERSON_PX,
     detectable_range_m,
+    floor_points,
+    guess_layout,
     in_front,
     point_in_polygon,
+    polygon_area,
     seen_by,
     views_at,
     visible_floor,
@@ -87,3 +90,119 @@ def test_apartment_floor_is_the_room_not_the_recording(dev_json):
     g = np.mgrid[x0:x1:0.1, y0:y1:0.1].reshape(2, -1).T
     g = g[point_in_polygon(g, site.floor)]
     assert (views_at(site.cameras, g) >= 1).mean() > 0.97
+
+
+# --- layouts: wall, ring, ceiling -----------------------------------------------------------------
+
+
+def _cam(cid: str, pos, target=None, R=None, w=1280, h=720, f=900.0) -> Camera:
+    R = look_at_rotation(np.array(pos, float), np.array(target, float)) if R is None else np.asarray(R, float)
+    return Camera(id=cid, width=w, height=h, fps=15.0, fx=f, fy=f, cx=w / 2, cy=h / 2,
+                  position=tuple(float(v) for v in pos), rotation=tuple(tuple(float(v) for v in r) for r in R))
+
+
+def _ring(n=5, radius=4.0, height=2.5) -> list[Camera]:
+    """n cameras evenly around a circle, each aimed at the centre at 1 m."""
+    a = 2 * np.pi * np.arange(n) / n
+    return [_cam(f"r{i}", (radius * np.cos(t), radius * np.sin(t), height), (0.0, 0.0, 1.0)) for i, t in enumerate(a)]
+
+
+def _down(pos, tilt_deg=0.0, heading_deg=0.0) -> np.ndarray:
+    """World-from-camera rotation of a camera looking straight down, then tilted ``tilt_deg`` towards ``heading_deg``."""
+    t, h = np.radians(tilt_deg), np.radians(heading_deg)
+    z = np.array([np.sin(t) * np.cos(h), np.sin(t) * np.sin(h), -np.cos(t)])  # optical axis
+    x = np.array([-np.sin(h), np.cos(h), 0.0])  # image x across the tilt
+    return np.stack([x, np.cross(z, x), z], axis=1)
+
+
+def _ceiling_grid() -> list[Camera]:
+    """Four wide-angle cameras (93 deg) 3.5 m up on a 2 m grid, looking straight down."""
+    return [_cam(f"c{i}", (x, y, 3.5), R=_down((x, y, 3.5)), f=600.0) for i, (x, y) in enumerate([(-1, -1), (1, -1), (1, 1), (-1, 1)])]
+
+
+def _ceiling_outward() -> list[Camera]:
+    """Four wide-angle cameras back to back at the ceiling's centre, 3.2 m up, each tilted 35 deg outward."""
+    return [_cam(f"o{i}", (0.0, 0.0, 3.2), R=_down((0, 0, 3.2), 35.0, 90.0 * i), f=600.0) for i in range(4)]
+
+
+def _apartment() -> list[Camera]:
+    return list(load_site(WTF_SITE).cameras)
+
+
+# (cameras, the layout guess_layout must see)
+LAYOUT_CASES = [
+    (_ring(5), "ring"),  # the issue's dome: five cameras around the space, aimed at its middle
+    (_ring(3), "ring"),  # three: the smallest ring, 120 deg apart
+    (_ring(4, radius=3.0, height=2.2), "ring"),  # a room's four corners
+    (_ceiling_grid(), "ceiling"),  # looking straight down
+    (_ceiling_outward(), "ceiling"),  # tilted outward, 55 deg below the horizon
+    (_apartment(), "wall"),  # the paper's apartment: three walls, a 190 deg gap where the room goes on
+    (_ring(5)[:2], "wall"),  # two cameras cannot surround anything
+    ([_cam("w0", (0, 0, 2.5), (4, 0, 1)), _cam("w1", (0, 3, 2.5), (4, 3, 1))], "wall"),  # side by side on one wall
+]
+
+
+@pytest.mark.parametrize("cameras, layout", LAYOUT_CASES)
+def test_guess_layout(cameras, layout):
+    assert guess_layout(cameras) == layout
+
+
+def test_a_ring_floor_is_the_views_overlap_inside_the_ring():
+    cams = _ring(5)
+    poly = visible_floor(cams, layout="ring")
+    area = polygon_area(poly)
+    hull = 0.5 * 5 * 4.0**2 * np.sin(2 * np.pi / 5)  # the ring's pentagon, 38 m^2
+    assert 0.5 * hull < area <= hull + 0.5
+    # The common view (where all five cameras see a person) is inside; the cameras' far views are not.
+    g = np.mgrid[-5:5.01:0.25, -5:5.01:0.25].reshape(2, -1).T
+    common = g[views_at(cams, g) == 5]
+    assert len(common) > 50 and point_in_polygon(common, poly).mean() > 0.97
+    assert not point_in_polygon(np.array([[0.0, 7.0], [-6.0, 0.0]]), poly).any()
+    assert (views_at(cams, floor_points(poly, 0.2)) >= 2).mean() > 0.97
+    assert polygon_area(poly, signed=True) > 0  # counter-clockwise
+
+
+@pytest.mark.parametrize("cameras, lo, hi", [
+    (_ceiling_grid(), 15.0, 40.0),  # 2 x 2 grid straight down: the views' overlap, a cross, and its corners
+    (_ceiling_outward(), 40.0, 120.0),  # back to back: four overlaps apart (the diagonals), joined
+])
+def test_a_ceiling_floor_is_where_the_cameras_views_overlap(cameras, lo, hi):
+    poly = visible_floor(cameras, layout="ceiling")
+    assert lo < polygon_area(poly) < hi
+    g = np.mgrid[-8:8.01:0.25, -8:8.01:0.25].reshape(2, -1).T
+    two = g[views_at(cameras, g) >= 2]
+    assert point_in_polygon(two, poly).mean() > 0.97  # every overlap
+    assert (views_at(cameras, floor_points(poly, 0.2)) >= 1).mean() > 0.97  # and nothing no camera sees
+
+
+def test_the_wall_rule_finds_no_room_for_cameras_back_to_back():
+    """Cameras at a ceiling's centre looking outward have no common 'in front': the old rule fails."""
+    with pytest.raises(ValueError, match="in front of them"):
+        visible_floor(_ceiling_outward(), layout="wall")
+    assert polygon_area(visible_floor(_ceiling_outward(), layout="auto")) > 40.0
+
+
+def test_auto_keeps_the_shipped_apartment_floor():
+    site = load_site(WTF_SITE)
+    assert visible_floor(site.cameras, layout="auto") == site.floor == visible_floor(site.cameras)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(layout="dome"), "valid layouts: auto, wall, ring, ceiling"),  # unknown layout names the valid ones
+    (dict(layout="ring", cameras=2), "at least 3 cameras"),  # two cameras are no ring
+])
+def test_visible_floor_layout_errors(kwargs, message):
+    cams = _ring(5)[: kwargs.pop("cameras", 5)]
+    with pytest.raises(ValueError, match=message):
+        visible_floor(cams, **kwargs)
+
+
+@pytest.mark.parametrize("polygon, area", [
+    (SQUARE, 4.0),  # counter-clockwise square
+    (SQUARE[::-1], 4.0),  # clockwise: the same area
+    (((0, 0), (1, 0), (0, 1)), 0.5),  # a triangle
+])
+def test_polygon_area(polygon, area):
+    assert polygon_area(polygon) == pytest.approx(area)
+    clockwise = polygon == SQUARE[::-1]
+    assert polygon_area(polygon, signed=True) == pytest.approx(-area if clockwise else area)
