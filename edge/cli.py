@@ -227,7 +227,8 @@ def _register_node(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--loop", action="store_true", help="video, replay: start the file again at its end")
     p.add_argument("--replay-start-ns", type=int_in(0, 2**63 - 1, "--replay-start-ns"), default=None, metavar="NS",
                    help="replay: wall time (UNIX ns) at which the recording's first observation is replayed; "
-                        "give every camera replayed from one file the same (default: when the node starts)")
+                        "give every camera replayed from one file the same (default: when the node starts); "
+                        "--start-at says the same in seconds")
     p.add_argument("--duration", type=positive, default=None, help="stop after this many seconds of world time")
     t = p.add_argument_group("timing (docs/commands.md#camera-timing); every observation keeps its capture stamp")
     t.add_argument("--fps", type=float_in(0.1, 1000.0, "--fps"), default=None, metavar="F",

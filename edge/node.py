@@ -296,7 +296,8 @@ def run_node(
                 people += len(obs.people)
                 if time.monotonic() - last_status > status_every_s:
                     last_status = time.monotonic()
-                    log.info("camera %s: %d frames published (%.1f/s), %d skipped, %.2f people/frame", camera_id, published,
+                    log.info("camera %s: %d frames %s (%.1f/s), %d skipped, %.2f people/frame", camera_id, published,
+                             "published" if scheduler is None else f"captured ({scheduler.delivered} delivered so far)",
                              published / (last_status - t0), getattr(source, "skipped", 0), people / max(published, 1))
             if scheduler is not None:
                 scheduler.finish(stop)  # what was captured is still delivered, each at its time

@@ -382,6 +382,10 @@ def test_a_video_at_another_rate_than_the_sites_camera_plays_at_its_own_with_a_w
         src = open_source(spec, site, "1", realtime=False, fps=5.0)
     assert not caplog.records
     assert np.allclose(np.diff([f.stamp_ns for f in src.frames()]), 200e6, atol=1)
+    # --start-at reaches the file's capture clock: its first frame is stamped at the start.
+    start = 1_800_000_000 * 10**9
+    src = open_source(spec, site, "1", realtime=False, start_ns=start)
+    assert [f.stamp_ns for f in src.frames()][:2] == [start, start + 100_000_000]
 
 
 def test_cli_detector_that_cannot_open(capsys, tmp_path):
