@@ -7,6 +7,10 @@ run and, per scene and estimator, how many seeds met the bar, and the identity s
 extra tracks summed over them::
 
     python -m benchmarks.scene_seeds --scenes k,l --estimators geo-sim --seeds 11-40 --seconds 12 --jobs 2
+    python -m benchmarks.scene_seeds --scenes k --estimators analytic --timing prompt,mixed
+
+``--timing`` runs each camera timing of ``benchmarks.scenes.TIMINGS`` (default ``prompt``); a
+timing other than ``prompt`` is shown as ``estimator@timing``.
 
 12 s is as long as the real four-person recording held out for issue 28: most of the bar's
 misses start in the first seconds, while everyone is still a candidate. See docs/scenes.md.
@@ -22,7 +26,7 @@ from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import nullcontext
 
-from benchmarks.scenes import ESTIMATOR_NAMES, SCENES, _keys, run_scene
+from benchmarks.scenes import ESTIMATOR_NAMES, SCENES, TIMINGS, _keys, run_scene
 
 __all__ = ["main", "parse_seeds", "summarise"]
 
@@ -46,9 +50,9 @@ def parse_seeds(text: str) -> list[int]:
     return sorted(seeds)
 
 
-def _one(job: tuple[str, float, int, tuple[str, ...]]) -> tuple[str, int, dict]:
-    key, seconds, seed, estimators = job
-    return key, seed, run_scene(key, seconds, seed, estimators)
+def _one(job: tuple[str, float, int, tuple[str, ...], tuple[str, ...]]) -> tuple[str, int, dict]:
+    key, seconds, seed, estimators, timings = job
+    return key, seed, run_scene(key, seconds, seed, estimators, timings=timings)
 
 
 def summarise(runs: Sequence[tuple[str, int, dict]]) -> dict[tuple[str, str], dict]:
@@ -67,11 +71,12 @@ def summarise(runs: Sequence[tuple[str, int, dict]]) -> dict[tuple[str, str], di
     return out
 
 
-def main(scenes: Sequence[str], seeds: Sequence[int], seconds: float, estimators: Sequence[str], jobs: int = 1) -> int:
+def main(scenes: Sequence[str], seeds: Sequence[int], seconds: float, estimators: Sequence[str], jobs: int = 1,
+         timings: Sequence[str] = ("prompt",)) -> int:
     t = time.monotonic()
     print(f"{len(scenes)} scene(s) x {len(seeds)} seed(s), {seconds:g} s each; bar = the real-recording bar (benchmarks.scenes)", flush=True)
     print(f"{'scene':<6} {'seed':>4} {'estimator':<9} {'recall':>6} {'IDsw':>4} {'extra':>5} {'FP%':>5} {'pos50':>5} {'yaw50':>5} {'bar':>3}", flush=True)
-    jobs_ = [(key, seconds, seed, tuple(estimators)) for key in scenes for seed in seeds]
+    jobs_ = [(key, seconds, seed, tuple(estimators), tuple(timings)) for key in scenes for seed in seeds]
     runs: list[tuple[str, int, dict]] = []
     with ProcessPoolExecutor(max_workers=jobs) if jobs > 1 else nullcontext() as pool:
         for key, seed, sc in (pool.map if pool is not None else map)(_one, jobs_):
@@ -96,10 +101,12 @@ if __name__ == "__main__":
     p.add_argument("--seconds", type=float, default=12.0, help="simulated seconds per run (default 12, the held-out recording's length)")
     p.add_argument("--estimators", type=lambda s: _keys(s, ESTIMATOR_NAMES, "estimators"), default=["geo-sim"],
                    help="estimators to score (default geo-sim, what the no-ground-truth journey gives such a room)")
+    p.add_argument("--timing", type=lambda s: _keys(s, list(TIMINGS), "timing"), default=["prompt"],
+                   help=f"camera timings, e.g. prompt,mixed (default prompt; any of {','.join(TIMINGS)})")
     p.add_argument("--jobs", type=int, default=1, help="runs in this many processes at once")
     a = p.parse_args()
     if not 1 <= a.jobs <= (os.cpu_count() or 1) * 4:
         p.error(f"--jobs must be in [1, {(os.cpu_count() or 1) * 4}], got {a.jobs}")
     if not 1.0 <= a.seconds <= 3600.0:
         p.error(f"--seconds must be in [1, 3600], got {a.seconds}")
-    sys.exit(main(a.scenes, a.seeds, a.seconds, a.estimators, a.jobs))
+    sys.exit(main(a.scenes, a.seeds, a.seconds, a.estimators, a.jobs, a.timing))

@@ -1,7 +1,8 @@
 """Tracker and estimators in hard conditions: seeded simulated scenes, MOTA-style scores (issue 28, item 4).
 
     python -m benchmarks.scenes [--scenes a,b,...] [--seconds 45] [--seed 1]
-                                [--estimators analytic,rays,site] [--jobs 2] [--json-out F]
+                                [--estimators analytic,rays,site] [--timing prompt,late0.8,...]
+                                [--jobs 2] [--json-out F]
 
 (from the repository; ``python benchmarks/scenes.py`` works too.)
 
@@ -32,18 +33,40 @@ changes to what the cameras report (``SCENES``):
   camera frame) and a phantom in a corner of the floor that the first camera reports.
 
 Every camera runs at 15 fps, frames staggered within the frame period, through the host's pure
-core in-process (``host.aggregator.Aggregator``: decode, tracker, set S, estimator, filter), one
-step after each frame: deterministic for a seed, and with no transport in the figures.
+core in-process (``host.aggregator.Aggregator``: decode, tracker, set S, estimator, filter):
+deterministic for a seed, and with no transport in the figures.
 
-Scoring (``MotScorer``), once per frame period (after each camera has sent one frame): each
-published person is compared with the truth at its own capture time (``PersonPose.stamp_ns``),
-and published people are matched to true people as CLEAR MOT does: a true person's last track
-keeps them while within the gate (0.5 m), the rest by the Hungarian algorithm on floor distance
-within the gate. A true person counts (``countable``) while some camera reports at least 3 of
-their joints (what the tracker uses) within the host's freshness (0.5 s), once such sightings
-have gone on for 2.5 s (2 s confirmation + 0.5 s) without a gap over 1 s; a published person
-matched to a true person who does not count is neither a hit nor a false positive.
-``coverage`` is the share of true person-steps that count: what the cameras let the host see.
+Camera timing (``TIMINGS``, ``--timing``): how the frames reach the host. Each variant feeds
+the recording's frames to the aggregator in delivery order, ``now`` = the delivery time, with a
+host step after each delivery time (after all the frames delivered then, as the live host steps
+after draining its queue). A camera's frame captured at ``c`` is delivered at ``max(previous
+delivery, c + delay + jitter)`` (``edge.delivery``: normal jitter clipped at no delay, in order
+per camera), and its capture stamp is kept:
+
+- ``prompt``: every frame delivered at its capture time (the figures before camera timing);
+- ``late0.3``, ``late0.8``: every camera 0.3 / 0.8 s late;
+- ``mixed``: 0.1 / 0.4 / 0.8 / 1.2 / 0.3 s late by camera index (cycling for more cameras),
+  50 ms jitter;
+- ``mixedfps``: 25 / 10 / 5 / 25 / 10 fps by camera index (cycling), 0.2 s late, 50 ms jitter.
+  The cameras are simulated at those rates (a 15 fps recording cannot give 25 fps).
+
+Scoring (``MotScorer``), once per 15 fps frame period (at the instant the last camera's frame of
+that period is captured), with the array the host last published by then: each published person
+is compared with the truth at its own capture time (``PersonPose.stamp_ns``; ``Recording.truth_at``
+asks the simulated world at any instant), and published people are matched to true people as
+CLEAR MOT does: a true person's last track keeps them while within the gate (0.5 m), the rest by
+the Hungarian algorithm on floor distance within the gate. A true person counts (``countable``,
+``Visibility``, by capture time: what the cameras captured, delivered yet or not) while some
+camera reports at least 3 of their joints (what the tracker uses) within the host's freshness
+(0.5 s), once such sightings have gone on for 2.5 s (2 s confirmation + 0.5 s) without a gap over
+1 s. A true person matched to a published person counts or not at that person's own capture
+time; one matched to nobody, at the scoring instant. A published person matched to a true person
+who does not count is neither a hit nor a false positive. ``coverage`` is the share of true
+person-steps that count at the scoring instants: what the cameras let the host see.
+
+- ``empty_in_view``: the share of the PoseArrays the host published (one per step) that were
+  empty while someone counted at their publish instant;
+- ``mean_views``: cameras per published person.
 
 - recall = hits / countable person-steps; precision = hits / (hits + false positives), a false
   positive being a published person matched to nobody: ``dup`` if a true person is within the
@@ -76,6 +99,7 @@ median yaw <= 7 deg.
 from __future__ import annotations
 
 import argparse
+import bisect
 import dataclasses
 import json
 import math
@@ -98,6 +122,7 @@ from superbody.edge import transport
 from superbody.edge.angles import wrap_angle
 from superbody.edge.camera import Camera, look_at_rotation
 from superbody.edge.colour import HIST_BINS
+from superbody.edge.delivery import DeliveryModel, delivery_times
 from superbody.edge.messages import wire
 from superbody.edge.messages.observation import Observation, PersonView
 from superbody.edge.resources import model_path, site_path
@@ -109,7 +134,8 @@ from superbody.host.estimation.analytic import AnalyticEstimator
 from superbody.host.estimation.estimator import Estimates, estimate_detailed
 from superbody.models.evaluation.temporal import SIGNATURE  # one flat histogram: identical clothing on everyone
 
-__all__ = ["Scene", "SCENES", "Recording", "MotScorer", "Visibility", "simulate", "replay", "run_scene", "main"]
+__all__ = ["Scene", "SCENES", "Timing", "TIMINGS", "Recording", "MotScorer", "Visibility", "simulate", "deliveries", "replay",
+           "run_scene", "main"]
 
 FPS: Final = 15.0
 T0_NS: Final = 1_700_000_000 * 1_000_000_000  # every scene starts here (the worlds' epoch)
@@ -260,6 +286,43 @@ SCENES: Final[dict[str, Callable[[], Scene]]] = {
 _PHANTOM_LOOK: Final = Appearance(1.7, 1.0, (0, 15, 80), (0, 10, 50), (10, 30, 120))
 
 
+# -- camera timing -----------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Timing:
+    """How a scene's cameras deliver their frames (module docstring).
+
+    Attributes:
+        name: the variant's name (``TIMINGS``).
+        delays_s: capture-to-delivery delay by camera index, seconds, cycling for more cameras.
+        jitter_s: the delays' standard deviation (normal, clipped at no delay), every camera.
+        fps: capture rate by camera index, cycling, or None: every camera at ``FPS``.
+    """
+
+    name: str
+    delays_s: tuple[float, ...] = (0.0,)
+    jitter_s: float = 0.0
+    fps: tuple[float, ...] | None = None
+
+    def delivery(self, index: int) -> DeliveryModel:
+        """Camera ``index``'s delay and jitter."""
+        return DeliveryModel(self.delays_s[index % len(self.delays_s)], self.jitter_s)
+
+    def camera_fps(self, cameras: int) -> tuple[float, ...]:
+        """(cameras,) each camera's capture rate."""
+        return tuple(FPS if self.fps is None else self.fps[i % len(self.fps)] for i in range(cameras))
+
+
+TIMINGS: Final[dict[str, Timing]] = {t.name: t for t in (
+    Timing("prompt"),
+    Timing("late0.3", (0.3,)),
+    Timing("late0.8", (0.8,)),
+    Timing("mixed", (0.1, 0.4, 0.8, 1.2, 0.3), 0.05),
+    Timing("mixedfps", (0.2,), 0.05, (25.0, 10.0, 5.0, 25.0, 10.0)),
+)}
+
+
 # -- simulation --------------------------------------------------------------------------------
 
 
@@ -269,16 +332,32 @@ class Recording:
 
     Attributes:
         frames: per frame in capture order: (stamp ns, camera id, payload, the true people it
-            reports with at least ``min_joints`` joints, whether it is the last camera of its frame period).
+            reports with at least ``min_joints`` joints).
         truth: capture stamp -> (N, 3) every person's (x, y, yaw) then.
         people: N.
         phantom_views: views of the phantom published.
+        score_at: the scoring instants (ns): once per ``FPS`` frame period, when the last
+            camera's frame of that period is captured.
+        fps: (cameras,) each camera's capture rate.
+        states: the simulated world's ``states(t_s)``, for the truth at any instant.
     """
 
-    frames: list[tuple[int, str, bytes, tuple[int, ...], bool]] = field(default_factory=list)
+    frames: list[tuple[int, str, bytes, tuple[int, ...]]] = field(default_factory=list)
     truth: dict[int, NDArray[np.float64]] = field(default_factory=dict)
     people: int = 0
     phantom_views: int = 0
+    score_at: list[int] = field(default_factory=list)
+    fps: tuple[float, ...] = ()
+    states: Callable[[float], list[PersonState]] | None = None
+
+    def truth_at(self, stamp_ns: int) -> NDArray[np.float64]:
+        """(N, 3) every person's (x, y, yaw) at any instant: a frame's remembered truth, else the world's."""
+        hit = self.truth.get(stamp_ns)
+        if hit is not None:
+            return hit
+        if self.states is None:
+            raise KeyError(f"no truth at {stamp_ns} and no world to ask")
+        return np.array([[s.x, s.y, s.yaw] for s in self.states(stamp_ns * 1e-9)]).reshape(-1, 3)
 
 
 def _recolour(obs: Observation, colour: str) -> Observation:
@@ -317,9 +396,13 @@ def miscalibrated(site: Site, degrees: float, metres: float, seed: int) -> Site:
     return dataclasses.replace(site, cameras=tuple(cams))
 
 
-def simulate(scene: Scene, seconds: float, seed: int, min_joints: int = 3, progress: bool = False) -> Recording:
+def simulate(scene: Scene, seconds: float, seed: int, min_joints: int = 3, progress: bool = False,
+             fps: Sequence[float] | None = None) -> Recording:
     """Every camera's frames for ``seconds`` of the scene, encoded, with the truth; the cameras
-    render from where they really are (``Scene.calibration_error``)."""
+    render from where they really are (``Scene.calibration_error``).
+
+    Camera i captures frame k at ``(k + i / n) / fps_i`` seconds after the scene's start (``fps``:
+    by camera, default ``FPS`` for all): staggered within the frame period."""
     site = miscalibrated(scene.site, *scene.calibration_error, seed)
     world = World(site, scene.people, seed=seed, period_s=max(60.0, seconds + 10.0), epoch_s=T0_NS / 1e9)
     # The cameras render the world's states at each capture time; the truth is those same
@@ -332,27 +415,51 @@ def simulate(scene: Scene, seconds: float, seed: int, min_joints: int = 3, progr
         return memo[t_s]
 
     world.states = remembered  # type: ignore[method-assign]
-    cams = [SimCamera(world, c.id, noise=scene.noise) for c in site.cameras]
-    rec = Recording(people=scene.people)
-    n = len(cams)
+    n = len(site.cameras)
+    rates = tuple(float(f) for f in fps) if fps is not None else (FPS,) * n
+    if len(rates) != n:
+        raise ValueError(f"fps: one rate per camera ({n}), got {len(rates)}")
+    cams = [SimCamera(world, c.id, noise=scene.noise, fps=f) for c, f in zip(site.cameras, rates)]
+    rec = Recording(people=scene.people, fps=rates, states=states)
     rounds = int(seconds * FPS)
-    bar = _bar(rounds, f"{scene.key} simulate", progress)
-    for k in range(rounds):
-        for i, cam in enumerate(cams):
-            stamp = T0_NS + int((k + i / n) * 1e9 / FPS)
-            obs, who = cam.observe(stamp)
-            if scene.phantom is not None and i == 0:
-                view = _phantom_view(scene, cam, k, seed)
-                if view is not None:
-                    obs = dataclasses.replace(obs, people=obs.people + (view,))
-                    rec.phantom_views += 1
-            obs = _recolour(obs, scene.colour)
-            seen = tuple(sorted({w for w, v in zip(who, obs.people) if w >= 0 and v.num_visible >= min_joints}))
-            rec.frames.append((stamp, cam.camera.id, wire.encode(obs), seen, i == n - 1))
-            rec.truth[stamp] = np.array([[s.x, s.y, s.yaw] for s in memo.pop(stamp * 1e-9)]).reshape(-1, 3)
+    rec.score_at = [T0_NS + int((k + (n - 1) / n) * 1e9 / FPS) for k in range(rounds)]
+    # Every camera's capture instants, in capture order (at equal rates: round by round, camera by camera).
+    schedule = sorted((T0_NS + int((k + i / n) * 1e9 / f), i, k) for i, f in enumerate(rates) for k in range(int(seconds * f)))
+    bar = _bar(len(schedule), f"{scene.key} simulate", progress)
+    for stamp, i, k in schedule:
+        cam = cams[i]
+        obs, who = cam.observe(stamp)
+        if scene.phantom is not None and i == 0:
+            view = _phantom_view(scene, cam, k, seed)
+            if view is not None:
+                obs = dataclasses.replace(obs, people=obs.people + (view,))
+                rec.phantom_views += 1
+        obs = _recolour(obs, scene.colour)
+        seen = tuple(sorted({w for w, v in zip(who, obs.people) if w >= 0 and v.num_visible >= min_joints}))
+        rec.frames.append((stamp, cam.camera.id, wire.encode(obs), seen))
+        rec.truth[stamp] = np.array([[s.x, s.y, s.yaw] for s in memo.pop(stamp * 1e-9)]).reshape(-1, 3)
         bar.update()
     bar.close()
     return rec
+
+
+def deliveries(rec: Recording, site: Site, timing: Timing, seed: int) -> list[tuple[int, int]]:
+    """When each frame of a recording reaches the host: (delivery time ns, index in ``rec.frames``),
+    in delivery order (ties in capture order). Each camera's delays are drawn from its own
+    seeded generator (``seed``, camera index)."""
+    index = {c.id: i for i, c in enumerate(site.cameras)}
+    by_camera: dict[str, list[int]] = {}
+    for j, frame in enumerate(rec.frames):
+        by_camera.setdefault(frame[1], []).append(j)
+    out: list[tuple[int, int]] = []
+    for cam, idx in by_camera.items():
+        i = index[cam]
+        stamps = np.array([rec.frames[j][0] for j in idx], dtype=np.int64)
+        model = timing.delivery(i)
+        due = delivery_times(stamps, model.delays_ns(len(stamps), np.random.default_rng([seed, 0xDE1, i])))
+        out.extend(zip(due.tolist(), idx))
+    out.sort()
+    return out
 
 
 # -- scoring -----------------------------------------------------------------------------------
@@ -362,6 +469,9 @@ class Visibility:
     """Which true people count at a time: seen (by any camera, enough joints) within ``fresh_s``,
     in a run of sightings without a gap over ``gap_s`` that began at least ``settle_s`` ago.
 
+    Sightings are kept by capture time, so ``countable`` answers for any instant (only the
+    sightings up to it count), in whatever order the instants are asked.
+
     Args:
         people: N.
         fresh_s, gap_s, settle_s: as above (the host's freshness, the tracker's
@@ -369,19 +479,26 @@ class Visibility:
     """
 
     def __init__(self, people: int, fresh_s: float = 0.5, gap_s: float = 1.0, settle_s: float = 2.5):
-        self.last = np.full(people, -(2**62), dtype=np.int64)
-        self.start = np.zeros(people, dtype=np.int64)
+        self._times: list[list[int]] = [[] for _ in range(people)]  # per person, sighting stamps (ascending)
+        self._starts: list[list[int]] = [[] for _ in range(people)]  # the start of the run each sighting belongs to
         self.fresh_ns, self.gap_ns, self.settle_ns = (round(v * 1e9) for v in (fresh_s, gap_s, settle_s))
 
     def saw(self, who: Sequence[int], stamp_ns: int) -> None:
+        """People seen at capture time ``stamp_ns``; each person's sightings must come in capture order."""
         for k in who:
-            if stamp_ns - self.last[k] > self.gap_ns:
-                self.start[k] = stamp_ns
-            self.last[k] = max(self.last[k], stamp_ns)
+            times, starts = self._times[k], self._starts[k]
+            if times and stamp_ns < times[-1]:
+                raise ValueError(f"person {k}: sighting at {stamp_ns} ns before the one at {times[-1]} ns")
+            starts.append(stamp_ns if not times or stamp_ns - times[-1] > self.gap_ns else starts[-1])
+            times.append(stamp_ns)
 
     def countable(self, now_ns: int) -> NDArray[np.bool_]:
         """(N,) whether each person counts at ``now_ns``."""
-        return (now_ns - self.last <= self.fresh_ns) & (now_ns - self.start >= self.settle_ns)
+        out = np.zeros(len(self._times), dtype=bool)
+        for k, times in enumerate(self._times):
+            i = bisect.bisect_right(times, now_ns) - 1
+            out[k] = i >= 0 and now_ns - times[i] <= self.fresh_ns and now_ns - self._starts[k][i] >= self.settle_ns
+        return out
 
 
 class MotScorer:
@@ -394,6 +511,7 @@ class MotScorer:
     def __init__(self, gate_m: float = GATE_M):
         self.gate_m = gate_m
         self.steps = self.truth_steps = self.gt = self.tp = self.fn = self.idsw = self.ghost_steps = self.dup_steps = 0
+        self.visible = 0  # true person-steps that count at the scoring instants: what the cameras show, whatever is published
         self.published = 0
         self.pos_err: list[float] = []
         self.yaw_err: list[float] = []
@@ -401,15 +519,17 @@ class MotScorer:
         self._owners: dict[int, Counter[int]] = {}  # track id -> steps matched to, or beside, each true person (or _NOBODY)
         self._ids: set[int] = set()  # every published track id
 
-    def add(self, truth: NDArray, countable: NDArray, ids: Sequence[int], poses: NDArray) -> None:
+    def add(self, truth: NDArray, countable: NDArray, ids: Sequence[int], poses: NDArray, countable_at: NDArray | None = None) -> None:
         """Score one step.
 
         Args:
             truth: (N, 3) the true people's (x, y, yaw), or (M, N, 3): at each published
                 person's own capture time.
-            countable: (N,) which true people count now (``Visibility``).
+            countable: (N,) which true people count now (``Visibility``): for those matched to nobody.
             ids: (M,) published track ids.
             poses: (M, 3) published (x, y, yaw).
+            countable_at: (M, N) which true people count at each published person's own capture
+                time: for those matched to that person (default: ``countable``).
         """
         countable = np.asarray(countable, dtype=bool)
         n, m = len(countable), len(ids)
@@ -417,18 +537,24 @@ class MotScorer:
         truth = np.broadcast_to(np.asarray(truth, dtype=np.float64).reshape(-1, n, 3), (m, n, 3)) if m else np.zeros((0, n, 3))
         self.steps += 1
         self.truth_steps += n
-        self.gt += int(countable.sum())
+        self.visible += int(countable.sum())
         self.published += m
         self._ids.update(int(i) for i in ids)
         dist = np.linalg.norm(truth[:, :, :2] - poses[:, None, :2], axis=2)  # (M, N)
         rows, cols = self._match(dist, [int(i) for i in ids])
+        counts = countable.copy()  # whether each true person counts, when the step is taken to see them
+        if countable_at is not None:
+            at = np.asarray(countable_at, dtype=bool).reshape(m, n)
+            for r, k in zip(rows, cols):
+                counts[k] = at[r, k]
+        self.gt += int(counts.sum())
         hit = np.zeros(n, dtype=bool)
         taken = np.zeros(m, dtype=bool)
         for r, k in zip(rows, cols):
             taken[r] = True
             tid = int(ids[r])
             self._owners.setdefault(tid, Counter())[int(k)] += 1
-            if not countable[k]:
+            if not counts[k]:
                 continue  # a person the cameras have not shown long enough: neither hit nor false positive
             hit[k] = True
             self.tp += 1
@@ -437,7 +563,7 @@ class MotScorer:
             self._last_id[int(k)] = tid
             self.pos_err.append(float(dist[r, k]))
             self.yaw_err.append(abs(float(wrap_angle(poses[r, 2] - truth[r, k, 2]))))
-        self.fn += int((countable & ~hit).sum())
+        self.fn += int((counts & ~hit).sum())
         for r in np.flatnonzero(~taken).tolist():
             if n and dist[r].min() <= self.gate_m:  # beside someone already matched: a duplicate of them
                 self.dup_steps += 1
@@ -492,7 +618,7 @@ class MotScorer:
             "false_positive_share": fp / self.published if self.published else math.nan,
             "mota": 1.0 - (self.fn + fp + self.idsw) / self.gt if self.gt else math.nan,
             "tracks": len(self._ids), "ghost_tracks": ghosts, "duplicate_tracks": dups, "extra_tracks": ghosts + dups,
-            "coverage": self.gt / self.truth_steps if self.truth_steps else math.nan,
+            "coverage": self.visible / self.truth_steps if self.truth_steps else math.nan,
             "position_mm_p50": q(pos, 50), "position_mm_p90": q(pos, 90), "yaw_deg_p50": q(yaw, 50), "yaw_deg_p90": q(yaw, 90),
         }
 
@@ -560,31 +686,59 @@ def estimators_for(site: Site, names: Sequence[str]) -> dict[str, tuple[object, 
     return out
 
 
-def replay(scene: Scene, rec: Recording, estimator, name: str, config: HostConfig = HostConfig(), progress: bool = False) -> dict:
-    """The recording through the host's aggregator, a step after each frame; the scores."""
+def replay(scene: Scene, rec: Recording, estimator, name: str, config: HostConfig = HostConfig(), progress: bool = False,
+           timing: Timing = TIMINGS["prompt"], seed: int = 0) -> dict:
+    """The recording through the host's aggregator in delivery order (``deliveries``), a step
+    after each delivery time; the scores (module docstring)."""
     site = scene.site
     agg = Aggregator(site, estimator, name, config)
     keys = {c.id: transport.observation_key(site.name, c.id) for c in site.cameras}
     tc = config.tracker
     vis = Visibility(rec.people, config.freshness_s, tc.confirm_max_gap_s, tc.confirm_after_s + SETTLE_S)
+    for stamp, _cam, _payload, seen in rec.frames:  # what the cameras captured, delivered yet or not
+        vis.saw(seen, stamp)
+    if isinstance(estimator, _ViewLimit):
+        estimator.estimates = estimator.over = estimator.largest = 0
     scorer = MotScorer()
     views: list[int] = []
-    bar = _bar(len(rec.frames), f"{scene.key} {name}", progress)
-    for stamp, cam, payload, seen, last in rec.frames:
-        agg.ingest(payload, keys[cam], stamp)
-        vis.saw(seen, stamp)
-        arr = agg.step(stamp)
-        bar.update()
-        if not last:
-            continue
-        people = arr.people
-        truth = np.stack([rec.truth[p.stamp_ns] for p in people]) if people else np.zeros((0, rec.people, 3))
-        scorer.add(truth, vis.countable(stamp), [p.id for p in people], np.array([[p.x, p.y, p.yaw] for p in people]).reshape(-1, 3))
+    order = deliveries(rec, site, timing, seed)
+    bar = _bar(len(order), f"{scene.key} {name} {timing.name}", progress)
+    published: tuple = ()  # the host's last PoseArray's people
+    arrays = in_view = empty_in_view = 0
+    todo = iter(rec.score_at)
+    s_next = next(todo, None)
+
+    def score(at_ns: int, people: tuple) -> None:
+        truth = np.stack([rec.truth_at(p.stamp_ns) for p in people]) if people else np.zeros((0, rec.people, 3))
+        at = np.stack([vis.countable(p.stamp_ns) for p in people]) if people else None
+        scorer.add(truth, vis.countable(at_ns), [p.id for p in people], np.array([[p.x, p.y, p.yaw] for p in people]).reshape(-1, 3), at)
         views.extend(p.views for p in people)
+
+    i = 0
+    while i < len(order):
+        now = order[i][0]
+        while s_next is not None and s_next < now:  # scored with what the host had published by then
+            score(s_next, published)
+            s_next = next(todo, None)
+        while i < len(order) and order[i][0] == now:
+            stamp, cam, payload, _seen = rec.frames[order[i][1]]
+            agg.ingest(payload, keys[cam], now)
+            i += 1
+            bar.update()
+        published = agg.step(now).people
+        arrays += 1
+        if vis.countable(now).any():
+            in_view += 1
+            empty_in_view += not published
+    while s_next is not None:
+        score(s_next, published)
+        s_next = next(todo, None)
     bar.close()
     out = scorer.summary()
     out["meets_bar"] = meets_bar(out)
     out["mean_views"] = float(np.mean(views)) if views else math.nan
+    out.update(timing=timing.name, frames_delivered=len(order), arrays=arrays, arrays_in_view=in_view,
+               empty_in_view=empty_in_view / in_view if in_view else math.nan)
     if isinstance(estimator, _ViewLimit):
         out.update(max_views=estimator.max_views, largest_view_set=estimator.largest,
                    views_over_limit=estimator.over / estimator.estimates if estimator.estimates else 0.0)
@@ -595,23 +749,41 @@ def replay(scene: Scene, rec: Recording, estimator, name: str, config: HostConfi
     return out
 
 
-def run_scene(key: str, seconds: float, seed: int, estimators: Sequence[str] = ESTIMATOR_NAMES, progress: bool = False) -> dict:
-    """Simulate one scene and score every estimator that can serve it."""
+def result_key(estimator: str, timing: str) -> str:
+    """A run's key in a scene's ``estimators``: the estimator's name for ``prompt``, else ``name@timing``."""
+    return estimator if timing == "prompt" else f"{estimator}@{timing}"
+
+
+def run_scene(key: str, seconds: float, seed: int, estimators: Sequence[str] = ESTIMATOR_NAMES, progress: bool = False,
+              timings: Sequence[str] = ("prompt",)) -> dict:
+    """Simulate one scene and score every estimator that can serve it, under each camera timing
+    (results keyed by ``result_key``)."""
     if key not in SCENES:
         raise ValueError(f"unknown scene {key!r}; scenes: {', '.join(f'{k} ({SCENES[k]().name})' for k in SCENES)}")
+    bad = [t for t in timings if t not in TIMINGS]
+    if bad:
+        raise ValueError(f"unknown timing {bad[0]!r}; timings: {', '.join(TIMINGS)}")
     scene = SCENES[key]()
+    n = len(scene.site.cameras)
     t = time.monotonic()
-    rec = simulate(scene, seconds, seed, progress=progress)
+    recordings: dict[tuple[float, ...], Recording] = {}  # one simulation per set of camera rates
+    for name in timings:
+        rates = TIMINGS[name].camera_fps(n)
+        if rates not in recordings:
+            recordings[rates] = simulate(scene, seconds, seed, progress=progress, fps=rates)
+    first = next(iter(recordings.values()))
     per_estimator: dict[str, dict] = {}
-    out = {"name": scene.name, "site": scene.site.name, "cameras": len(scene.site.cameras), "people": scene.people,
+    out = {"name": scene.name, "site": scene.site.name, "cameras": n, "people": scene.people,
            "camera_heights_m": [round(c.position[2], 3) for c in scene.site.cameras],
-           "colour": scene.colour, "spurious_prob": scene.noise.spurious_prob, "phantom_views": rec.phantom_views,
-           "frames": len(rec.frames), "simulate_s": time.monotonic() - t, "estimators": per_estimator}
+           "colour": scene.colour, "spurious_prob": scene.noise.spurious_prob, "phantom_views": first.phantom_views,
+           "frames": len(first.frames), "simulate_s": time.monotonic() - t, "estimators": per_estimator}
     for name, (est, label) in estimators_for(scene.site, estimators).items():
-        t = time.monotonic()
-        r = replay(scene, rec, est, label, progress=progress)
-        r["estimator"], r["replay_s"] = label, time.monotonic() - t
-        per_estimator[name] = r
+        for timing in timings:
+            tm = TIMINGS[timing]
+            t = time.monotonic()
+            r = replay(scene, recordings[tm.camera_fps(n)], est, label, progress=progress, timing=tm, seed=seed)
+            r["estimator"], r["replay_s"] = label, time.monotonic() - t
+            per_estimator[result_key(name, timing)] = r
     return out
 
 
@@ -623,25 +795,28 @@ def _bar(total: int, desc: str, enabled: bool):
 
 # -- the table ---------------------------------------------------------------------------------
 
-_HEADER = (f"{'scene':<15} {'estimator':<9} {'cams':>4} {'ppl':>3} {'cover':>5} {'recall':>6} {'prec':>6} {'MOTA':>6} {'IDsw':>4} "
-           f"{'extra':>5} {'ghost':>5} {'dup':>4} {'FP%':>5} {'pos50':>5} {'pos90':>5} {'yaw50':>5} {'yaw90':>5} {'views>max':>9} {'bar':>3}")
+_HEADER = (f"{'scene':<15} {'estimator':<9} {'timing':<8} {'cams':>4} {'ppl':>3} {'cover':>5} {'recall':>6} {'prec':>6} {'MOTA':>6} "
+           f"{'IDsw':>4} {'extra':>5} {'ghost':>5} {'dup':>4} {'FP%':>5} {'pos50':>5} {'pos90':>5} {'yaw50':>5} {'yaw90':>5} "
+           f"{'views':>5} {'empty%':>6} {'views>max':>9} {'bar':>3}")
 
 
 def _row(key: str, sc: dict, name: str, r: dict) -> str:
     over = f"{100 * r['views_over_limit']:.0f}%" if "views_over_limit" in r else "-"
-    return (f"{key + ' ' + sc['name']:<15} {name:<9} {sc['cameras']:>4} {sc['people']:>3} {r['coverage']:>5.2f} {r['recall']:>6.3f} "
-            f"{r['precision']:>6.3f} {r['mota']:>6.3f} {r['id_switches']:>4} {r['extra_tracks']:>5} {r['ghost_tracks']:>5} "
-            f"{r['duplicate_tracks']:>4} {100 * r['false_positive_share']:>5.1f} {r['position_mm_p50']:>5.0f} {r['position_mm_p90']:>5.0f} "
-            f"{r['yaw_deg_p50']:>5.1f} {r['yaw_deg_p90']:>5.1f} {over:>9} {'yes' if r['meets_bar'] else 'no':>3}")
+    return (f"{key + ' ' + sc['name']:<15} {name.split('@')[0]:<9} {r['timing']:<8} {sc['cameras']:>4} {sc['people']:>3} "
+            f"{r['coverage']:>5.2f} {r['recall']:>6.3f} {r['precision']:>6.3f} {r['mota']:>6.3f} {r['id_switches']:>4} "
+            f"{r['extra_tracks']:>5} {r['ghost_tracks']:>5} {r['duplicate_tracks']:>4} {100 * r['false_positive_share']:>5.1f} "
+            f"{r['position_mm_p50']:>5.0f} {r['position_mm_p90']:>5.0f} {r['yaw_deg_p50']:>5.1f} {r['yaw_deg_p90']:>5.1f} "
+            f"{r['mean_views']:>5.2f} {100 * r['empty_in_view']:>6.1f} {over:>9} {'yes' if r['meets_bar'] else 'no':>3}")
 
 
 def main(scenes: Sequence[str], seconds: float, seed: int, estimators: Sequence[str] = ESTIMATOR_NAMES, jobs: int = 1,
-         json_out: str | None = None, progress: bool = True) -> int:
+         json_out: str | None = None, progress: bool = True, timings: Sequence[str] = ("prompt",)) -> int:
     t = time.monotonic()
     results: dict[str, dict] = {}
     print(f"{len(scenes)} scene(s), {seconds:g} s each at {FPS:g} fps per camera, seed {seed}; scored after each frame period; "
           f"gate {GATE_M} m; positions in mm, yaw in deg (median, p90); extra = ghost + duplicate tracks; FP% = false positives "
-          "/ published people; bar = the real-recording bar", flush=True)
+          "/ published people; views = cameras per published person; empty% = empty PoseArrays / those published while someone "
+          "counts; bar = the real-recording bar; timing = how the cameras deliver (benchmarks/scenes.py TIMINGS)", flush=True)
     print(_HEADER, flush=True)
 
     def show(key: str, sc: dict) -> None:
@@ -651,19 +826,19 @@ def main(scenes: Sequence[str], seconds: float, seed: int, estimators: Sequence[
 
     if jobs <= 1 or len(scenes) == 1:
         for key in scenes:
-            show(key, run_scene(key, seconds, seed, estimators, progress=progress))
+            show(key, run_scene(key, seconds, seed, estimators, progress=progress, timings=timings))
     else:
         from tqdm import tqdm
 
         with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = {pool.submit(run_scene, key, seconds, seed, tuple(estimators)): key for key in scenes}
+            futures = {pool.submit(run_scene, key, seconds, seed, tuple(estimators), False, tuple(timings)): key for key in scenes}
             for fut in tqdm(as_completed(futures), total=len(futures), desc="scenes", leave=False, disable=not progress):
                 show(futures[fut], fut.result())
     elapsed = time.monotonic() - t
     print(f"{elapsed:.0f} s", flush=True)
     if json_out:
         doc = {"config": {"seconds": seconds, "seed": seed, "fps": FPS, "gate_m": GATE_M, "settle_s": SETTLE_S, "elapsed_s": elapsed,
-                          "scenes": list(scenes), "estimators": list(estimators)},
+                          "scenes": list(scenes), "estimators": list(estimators), "timings": list(timings)},
                "scenes": {k: results[k] for k in scenes}}
         Path(json_out).write_text(json.dumps(_jsonable(doc), indent=1, allow_nan=False) + "\n")
     return 0
@@ -698,6 +873,8 @@ if __name__ == "__main__":
     p.add_argument("--seed", type=int, default=1, help="the worlds' and detectors' seed")
     p.add_argument("--estimators", type=lambda s: _keys(s, ESTIMATOR_NAMES, "estimators"), default=list(ESTIMATOR_NAMES),
                    help="estimators to score (default: analytic,rays,site; site only where the site ships a model)")
+    p.add_argument("--timing", type=lambda s: _keys(s, list(TIMINGS), "timing"), default=["prompt"],
+                   help=f"camera timings to run, e.g. prompt,late0.8 (default prompt; any of {','.join(TIMINGS)})")
     p.add_argument("--jobs", type=int, default=1, help="scenes run in this many processes at once")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument("--json-out")
@@ -706,4 +883,4 @@ if __name__ == "__main__":
         p.error(f"--seconds must be in [3, 3600], got {a.seconds}")
     if not 1 <= a.jobs <= (os.cpu_count() or 1) * 4:
         p.error(f"--jobs must be in [1, {(os.cpu_count() or 1) * 4}], got {a.jobs}")
-    sys.exit(main(a.scenes, a.seconds, a.seed, a.estimators, a.jobs, a.json_out, progress=not a.no_progress))
+    sys.exit(main(a.scenes, a.seconds, a.seed, a.estimators, a.jobs, a.json_out, progress=not a.no_progress, timings=a.timing))

@@ -15,10 +15,20 @@ import sys
 from importlib.metadata import entry_points
 
 from superbody.edge import site_cli, transport
-from superbody.edge.cli_args import add_clock_args, add_session_args, clock_from_args, config_from_args, int_in, positive, stop_on_signals
+from superbody.edge.cli_args import (
+    add_clock_args,
+    add_session_args,
+    clock_from_args,
+    config_from_args,
+    float_in,
+    int_in,
+    positive,
+    stop_on_signals,
+)
+from superbody.edge.delivery import MAX_DELAY_S, MAX_JITTER_S, DeliveryModel
 from superbody.edge.detectors import DETECTOR_FORMS, DetectorSpec, parse_detector
 from superbody.edge.detectors.base import DetectorError
-from superbody.edge.node import DEFAULT_OAK_MODEL, SOURCE_FORMS, SourceSpec, open_source, parse_source, run_node
+from superbody.edge.node import DEFAULT_OAK_MODEL, FPS_SOURCES, SOURCE_FORMS, START_SOURCES, SourceSpec, open_source, parse_source, run_node
 from superbody.edge.router import run_router
 from superbody.edge.site import Site, SiteError, load_site
 from superbody.edge.sources.source import SourceError
@@ -125,6 +135,14 @@ def _check_options(args: argparse.Namespace) -> None:
         raise ValueError(f"--depth is for --source sim and oak, not --source {spec}")
     if spec.kind != "sim" and (args.clock_scale != 1.0 or args.clock_anchor_ns != 0):
         raise ValueError(f"--clock-scale and --clock-anchor-ns are for simulated sources; --source {spec} runs on the wall clock")
+    if args.fps is not None and spec.kind not in FPS_SOURCES:
+        raise ValueError(f"--fps is for --source {', '.join(FPS_SOURCES)}, not --source {spec} (it captures at its own rate)")
+    if args.start_at is not None and spec.kind not in START_SOURCES:
+        raise ValueError(f"--start-at is for --source {' and '.join(START_SOURCES)}, not --source {spec}")
+    if args.start_at is not None and args.replay_start_ns is not None:
+        raise ValueError("--start-at and --replay-start-ns say the same thing: give one")
+    if args.fast and (args.delay or args.jitter):
+        raise ValueError("--delay and --jitter are for sources paced in real time; --fast reads the file as fast as the detector goes")
 
 
 def _sized_for_site(spec: DetectorSpec, site: Site, camera_id: str) -> DetectorSpec:
@@ -166,8 +184,9 @@ def _run_node(args: argparse.Namespace) -> int:
         source = open_source(spec, site, args.camera, seed=args.seed or 0, people=3 if args.people is None else args.people,
                              depth=args.depth, clock=clock, nn_archive=args.nn_archive,
                              oak_model=args.oak_model or DEFAULT_OAK_MODEL, realtime=not args.fast, loop=args.loop,
-                             replay_start_ns=args.replay_start_ns)
-    except SourceError as e:
+                             replay_start_ns=args.replay_start_ns, fps=args.fps,
+                             start_ns=None if args.start_at is None else round(args.start_at * 1e9))
+    except (SourceError, ValueError) as e:
         return error(e)
     detector = None
     if args.detector is not None:
@@ -180,7 +199,8 @@ def _run_node(args: argparse.Namespace) -> int:
             return error(f"--detector {args.detector}: {e}")
     stop = stop_on_signals()
     try:
-        run_node(conf, site, args.camera, source, clock, args.duration, stop, detector=detector)
+        run_node(conf, site, args.camera, source, clock, args.duration, stop, detector=detector,
+                 delivery=DeliveryModel(args.delay, args.jitter))
     except (SourceError, DetectorError) as e:
         return error(e, 1)
     finally:
@@ -208,8 +228,20 @@ def _register_node(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--loop", action="store_true", help="video, replay: start the file again at its end")
     p.add_argument("--replay-start-ns", type=int_in(0, 2**63 - 1, "--replay-start-ns"), default=None, metavar="NS",
                    help="replay: wall time (UNIX ns) at which the recording's first observation is replayed; "
-                        "give every camera replayed from one file the same (default: when the node starts)")
+                        "give every camera replayed from one file the same (default: when the node starts); "
+                        "--start-at says the same in seconds")
     p.add_argument("--duration", type=positive, default=None, help="stop after this many seconds of world time")
+    t = p.add_argument_group("timing (docs/commands.md#camera-timing); every observation keeps its capture stamp")
+    t.add_argument("--fps", type=float_in(0.1, 1000.0, "--fps"), default=None, metavar="F",
+                   help="capture rate: sim captures at F instead of the site camera's fps; video and replay are thinned to F "
+                        "(at most their own rate)")
+    t.add_argument("--start-at", type=float_in(0.0, 9.2e9, "--start-at"), default=None, metavar="UNIX_SECONDS",
+                   help="video, replay: the wall time of the file's first frame; nodes given the same start share one capture "
+                        "clock (frame k of every file at the same instant), e.g. $(( $(date +%%s) + 5 ))")
+    t.add_argument("--delay", type=float_in(0.0, MAX_DELAY_S, "--delay"), default=0.0, metavar="S",
+                   help=f"publish each observation S seconds after its capture, in order (0-{MAX_DELAY_S:g}; default 0)")
+    t.add_argument("--jitter", type=float_in(0.0, MAX_JITTER_S, "--jitter"), default=0.0, metavar="S",
+                   help=f"standard deviation of a normal spread of that delay, clipped at 0 (0-{MAX_JITTER_S:g}; default 0)")
     add_clock_args(p)
     add_session_args(p)
     p.set_defaults(func=_run_node)

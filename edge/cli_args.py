@@ -15,7 +15,7 @@ from superbody.edge.transport import DEFAULT_ENDPOINT, session_config
 if TYPE_CHECKING:
     import zenoh
 
-__all__ = ["positive", "int_in", "add_clock_args", "clock_from_args", "add_session_args", "config_from_args", "fail", "stop_on_signals"]
+__all__ = ["positive", "int_in", "float_in", "add_clock_args", "clock_from_args", "add_session_args", "config_from_args", "fail", "stop_on_signals"]
 
 
 def positive(text: str) -> float:
@@ -39,6 +39,19 @@ def int_in(lo: int, hi: int, name: str):
         if not lo <= n <= hi:
             raise argparse.ArgumentTypeError(f"{name} must be in [{lo}, {hi}], got {n}")
         return n
+    return parse
+
+
+def float_in(lo: float, hi: float, name: str):
+    """argparse type: a finite number in [lo, hi]; the error names the option and the range."""
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            v = math.nan
+        if not (math.isfinite(v) and lo <= v <= hi):
+            raise argparse.ArgumentTypeError(f"{name} must be a number in [{lo:g}, {hi:g}], got {text!r}")
+        return v
     return parse
 
 

@@ -18,11 +18,24 @@ Sources (``--source``):
 Every frame takes one path (edge/sources/source.py): detections from the source or from the detector,
 each person's colour signature from their box in the image when there is one, then encode,
 publish.
+
+Timing (what real nodes do, reproduced; every Observation keeps its capture stamp):
+
+- ``--fps F``: the capture rate. The simulator captures at F instead of the site camera's fps;
+  video files and replays are thinned to F (edge/sources/subsample.py), which may not exceed
+  their own rate. A video file whose rate differs from the site camera's ``fps`` plays at its
+  own rate with a warning naming both (the file's timing is what happened; the site's fps is
+  what the camera is set to), unless ``--fps`` says which rate to publish.
+- ``--start-at UNIX_SECONDS``: video files and replays start on that capture clock, so nodes
+  started separately stamp frame k of their files at the same instant.
+- ``--delay S --jitter S``: each Observation is published S seconds after its capture, with a
+  normal spread, in order (edge/delivery.py); capture never waits for publishing.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from dataclasses import dataclass, replace
@@ -35,6 +48,7 @@ from numpy.typing import NDArray
 from superbody.edge import transport
 from superbody.edge.clock import WorldClock
 from superbody.edge.colour import hs_histogram
+from superbody.edge.delivery import DeliveryModel, DeliveryScheduler
 from superbody.edge.detectors.base import Detector
 from superbody.edge.messages import wire
 from superbody.edge.messages.observation import Observation, PersonView, empty_histogram
@@ -43,6 +57,8 @@ from superbody.edge.sources.source import Frame, FrameSource, SourceError
 
 __all__ = [
     "SOURCE_FORMS",
+    "FPS_SOURCES",
+    "START_SOURCES",
     "DEFAULT_OAK_MODEL",
     "SourceSpec",
     "parse_source",
@@ -57,6 +73,8 @@ log = logging.getLogger("superbody.edge")
 SOURCE_FORMS = ("sim", "oak[:DEVICE_ID]", "video:PATH", "webcam:INDEX", "rtsp://...", "replay:PATH.mcap")
 DEFAULT_OAK_MODEL = "luxonis/yolov8-nano-pose-estimation:coco-512x288"
 _MAX_WEBCAM = 63
+FPS_SOURCES = ("sim", "video", "replay")  # the sources ``--fps`` sets the capture rate of
+START_SOURCES = ("video", "replay")  # the sources ``--start-at`` starts on a shared capture clock
 
 
 @dataclass(frozen=True)
@@ -126,18 +144,31 @@ def open_source(
     realtime: bool = True,
     loop: bool = False,
     replay_start_ns: int | None = None,
+    fps: float | None = None,
+    start_ns: int | None = None,
 ) -> FrameSource:
     """Open the source a spec names for one camera of a site.
 
+    Args:
+        fps: capture rate: the simulator's instead of the site camera's; video files and
+            replays are thinned to it (``FPS_SOURCES`` only).
+        start_ns: wall time (UNIX ns) of a video file's first frame or a replay's first
+            observation (``START_SOURCES`` only; for replays the same as ``replay_start_ns``).
+
     Raises:
-        SourceError: the source cannot open, or delivers another image size than the site's
-            camera; the message names the source.
+        SourceError: the source cannot open, delivers another image size than the site's
+            camera, or has a lower frame rate than ``fps``; the message names the source.
+        ValueError: ``fps`` or ``start_ns`` given for a source that does not take them.
     """
     cam = site.camera(camera_id)
+    if fps is not None and spec.kind not in FPS_SOURCES:
+        raise ValueError(f"--fps is for --source {', '.join(FPS_SOURCES)}, not --source {spec}")
+    if start_ns is not None and spec.kind not in START_SOURCES:
+        raise ValueError(f"--start-at is for --source {' and '.join(START_SOURCES)}, not --source {spec}")
     if spec.kind == "sim":
         from superbody.edge.sources.sim_source import SimSource
 
-        return SimSource(site, camera_id, seed, people, depth, clock)
+        return SimSource(site, camera_id, seed, people, depth, clock, fps=fps)
     if spec.kind == "oak":
         try:
             from superbody.edge.sources.oak import open_oak_source
@@ -149,12 +180,19 @@ def open_source(
         from superbody.edge.sources.replay import ReplaySource
 
         try:
-            return ReplaySource(str(spec.target), site, camera_id, start_ns=replay_start_ns, loop=loop)
+            return ReplaySource(str(spec.target), site, camera_id, start_ns=start_ns if start_ns is not None else replay_start_ns,
+                                loop=loop, fps=fps)
         except ImportError as e:
             raise SourceError(f"--source {spec}: replay needs the mcap package (pip install 'superbody[view]'): {e}") from None
     from superbody.edge.sources.video import VideoSource
 
-    return VideoSource(spec.kind, spec.target, cam.width, cam.height, realtime=realtime, loop=loop)  # type: ignore[arg-type]
+    if spec.kind != "video":
+        return VideoSource(spec.kind, spec.target, cam.width, cam.height, realtime=realtime, loop=loop)  # type: ignore[arg-type]
+    video = VideoSource("video", str(spec.target), cam.width, cam.height, realtime=realtime, loop=loop, fps=fps, start_ns=start_ns)
+    if fps is None and not math.isclose(video.fps, cam.fps, rel_tol=0.01):
+        log.warning("camera %s: %s runs at %.3g fps, the site's camera at %.3g fps: publishing every frame at the file's %.3g fps "
+                    "(its own timing); --fps F thins it to F (at most %.3g)", camera_id, spec, video.fps, cam.fps, video.fps, video.fps)
+    return video
 
 
 def box_histogram(image: NDArray[np.uint8], box: NDArray) -> NDArray[np.float32]:
@@ -203,9 +241,16 @@ def run_node(
     status_every_s: float = 10.0,
     *,
     detector: Detector | None = None,
+    delivery: DeliveryModel = DeliveryModel(),
+    rng: np.random.Generator | None = None,
 ) -> int:
     """Publish an Observation per frame of ``source`` until it ends, ``stop`` is set or
     ``duration_s`` (world time) passes. Closes the source.
+
+    With a ``delivery`` delay or jitter, each Observation is handed to a ``DeliveryScheduler``
+    and published at its delivery time (world clock) while capture goes on; when the source
+    ends (or ``duration_s`` passes) the Observations still waiting are delivered before the
+    node stops, unless ``stop`` is set.
 
     Returns:
         The number of Observations published.
@@ -221,10 +266,12 @@ def run_node(
     with zenoh.open(conf) as session:
         token = session.liveliness().declare_token(transport.camera_alive_key(site.name, camera_id))
         pub = session.declare_publisher(transport.observation_key(site.name, camera_id), encoding=wire.zenoh_encoding())
+        scheduler = None if delivery.prompt else DeliveryScheduler(pub.put, delivery, clock, rng=rng).start()
         start = clock.now_ns()
         end = None if duration_s is None else start + int(duration_s * 1e9)
         last_status = t0 = time.monotonic()
-        log.info("camera %s of site %s publishing on %s", camera_id, site.name, transport.observation_key(site.name, camera_id))
+        log.info("camera %s of site %s publishing on %s%s", camera_id, site.name, transport.observation_key(site.name, camera_id),
+                 "" if scheduler is None else f", each observation {delivery.delay_s:g} s (sd {delivery.jitter_s:g} s) after its capture")
         try:
             for frame in source.frames():
                 if stop.is_set() or (end is not None and frame.stamp_ns > end):
@@ -241,18 +288,27 @@ def run_node(
                     if rejected <= 3 or rejected % 1000 == 0:
                         log.error("camera %s: frame %d not published (%d so far): %s", camera_id, obs.seq, rejected, e)
                     continue
-                pub.put(payload)
+                if scheduler is None:
+                    pub.put(payload)
+                else:
+                    scheduler.submit(obs.stamp_ns, payload)
                 published += 1
                 people += len(obs.people)
                 if time.monotonic() - last_status > status_every_s:
                     last_status = time.monotonic()
-                    log.info("camera %s: %d frames published (%.1f/s), %d skipped, %.2f people/frame", camera_id, published,
+                    log.info("camera %s: %d frames %s (%.1f/s), %d skipped, %.2f people/frame", camera_id, published,
+                             "published" if scheduler is None else f"captured ({scheduler.delivered} delivered so far)",
                              published / (last_status - t0), getattr(source, "skipped", 0), people / max(published, 1))
+            if scheduler is not None:
+                scheduler.finish(stop)  # what was captured is still delivered, each at its time
         finally:
+            if scheduler is not None:
+                scheduler.abort()
+                published = scheduler.delivered
+                if scheduler.dropped:
+                    log.warning("camera %s: %d observations dropped from a full delivery queue", camera_id, scheduler.dropped)
             source.close()
             pub.undeclare()
             token.undeclare()
     log.info("camera %s stopped after %d frames (%d skipped)", camera_id, published, getattr(source, "skipped", 0))
     return published
-
-

@@ -14,7 +14,17 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from superbody.edge.cli_args import add_clock_args, add_session_args, clock_from_args, config_from_args, int_in, positive, stop_on_signals
+from superbody.edge.cli_args import (
+    add_clock_args,
+    add_session_args,
+    clock_from_args,
+    config_from_args,
+    float_in,
+    int_in,
+    positive,
+    stop_on_signals,
+)
+from superbody.edge.delivery import MAX_DELAY_S, MAX_JITTER_S
 from superbody.edge.resources import site_path
 from superbody.edge.site import NAME_RE, SiteError, load_site
 from superbody.host.aggregator import HostConfig
@@ -259,17 +269,40 @@ def _print_summary(s: dict) -> None:
     print(f"  yaw MAE vs truth:             {'-' if ym is None else f'{ym:.1f} deg'}")
     print(f"  host latency p50 / p99:       {s['latency_ms']['p50']:.2f} / {s['latency_ms']['p99']:.2f} ms")
     print(f"  pose arrays published:        {s['poses_published']}")
+    timing = s.get("camera_timing", {})
+    if any(t["delay_s"] or t["jitter_s"] or t["fps"] is not None for t in timing.values()):
+        print("  camera timing:                " + "; ".join(
+            f"{cam}: {t['delay_s']:g} s late (sd {t['jitter_s']:g} s)" + ("" if t["fps"] is None else f", {t['fps']:g} fps")
+            for cam, t in timing.items()))
     if s["confirm_delay_s"]:
         print("  confirmed after appearing:    " + ", ".join(f"person {k}: {v:.1f} s" for k, v in sorted(s["confirm_delay_s"].items())))
     print(f"  logs:                         {s['log_dir']}")
 
 
+def _camera_value(flag: str, lo: float, hi: float, unit: str):
+    """argparse type: ``CAMERA=VALUE`` with VALUE a number in [lo, hi]; the error names the flag and range
+    (the camera id is checked against the site once it is loaded)."""
+    number = float_in(lo, hi, flag)
+
+    def parse(text: str) -> tuple[str, float]:
+        cam, sep, value = text.partition("=")
+        if not (sep and cam.strip()):
+            raise argparse.ArgumentTypeError(f"{flag} must be CAMERA={unit} with {unit} in [{lo:g}, {hi:g}], got {text!r}")
+        try:
+            return cam.strip(), number(value)
+        except argparse.ArgumentTypeError:
+            raise argparse.ArgumentTypeError(f"{flag} {cam.strip()}=...: {unit} must be a number in [{lo:g}, {hi:g}], got {value!r}") from None
+    return parse
+
+
 def _run_demo(args: argparse.Namespace) -> int:
     cfg = DemoConfig(site=args.site, people=args.people, seed=args.seed, duration_s=args.duration, clock_scale=args.clock_scale,
                      port=args.port, estimator=args.estimator, model=args.model, kill_camera=args.kill_camera,
-                     kill_at_s=args.kill_at, table=not args.no_table)
+                     kill_at_s=args.kill_at, table=not args.no_table, delay_s=args.delay, camera_delay_s=dict(args.camera_delay or ()),
+                     jitter_s=args.jitter, camera_fps=dict(args.camera_fps or ()))
     try:
         site = load_site(cfg.site)
+        cfg.check_cameras(site)
         if cfg.kill_camera is not None:
             site.camera(cfg.kill_camera)
     except (SiteError, KeyError) as e:
@@ -284,7 +317,7 @@ def _run_demo(args: argparse.Namespace) -> int:
     _print_summary(summary)
     if args.json_summary:
         keys = ("people_simulated", "people_confirmed", "tracks", "confirm_delay_s", "id_switches", "position_mae_mm", "yaw_mae_deg",
-                "latency_ms", "poses_published")
+                "latency_ms", "poses_published", "camera_timing")
         Path(args.json_summary).write_text(json.dumps({k: summary[k] for k in keys}, indent=1) + "\n")
     return 0
 
@@ -305,4 +338,13 @@ def _register_demo(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--kill-at", type=positive, default=10.0, help="simulated second at which to kill it (default 10)")
     p.add_argument("--no-table", action="store_true", help="no live table, only the summary")
     p.add_argument("--json-summary", metavar="F", help="write the summary as JSON")
+    t = p.add_argument_group("camera timing (as real nodes: late, jittered, each at its own rate; stamps stay capture times)")
+    t.add_argument("--delay", type=float_in(0.0, MAX_DELAY_S, "--delay"), default=0.0, metavar="S",
+                   help=f"every camera publishes each observation S seconds after its capture (0-{MAX_DELAY_S:g}; default 0)")
+    t.add_argument("--camera-delay", type=_camera_value("--camera-delay", 0.0, MAX_DELAY_S, "SECONDS"), action="append",
+                   metavar="ID=S", help="this camera's delay instead of --delay (repeatable), e.g. --camera-delay 1=0.8")
+    t.add_argument("--jitter", type=float_in(0.0, MAX_JITTER_S, "--jitter"), default=0.0, metavar="S",
+                   help=f"standard deviation of a normal spread of every camera's delay, clipped at 0 (0-{MAX_JITTER_S:g}; default 0)")
+    t.add_argument("--camera-fps", type=_camera_value("--camera-fps", 0.1, 1000.0, "FPS"), action="append", metavar="ID=F",
+                   help="this camera captures at F fps instead of the site's (repeatable), e.g. --camera-fps 3=5")
     p.set_defaults(func=_run_demo)

@@ -8,7 +8,13 @@ yaw, cameras, error against the simulated truth) and, on exit, a summary.
 The truth: the demo builds the same simulated world from the same site and seed. For every
 observation a camera publishes it recomputes locally which simulated person each view is (the
 simulation is deterministic), so it knows when each person first appeared and which person a
-published track follows: identity switches are counted exactly.
+published track follows: identity switches are counted exactly. Each published person is
+scored against the truth at their own capture stamp (``PersonPose.stamp_ns``), never at the
+array's publish time: a host may publish people as they were a moment ago.
+
+Camera timing (``DemoConfig``: ``--delay``, ``--camera-delay ID=S``, ``--jitter``, ``--camera-fps
+ID=F``): each camera node publishes its observations that long after their capture, in order,
+and captures at its own rate (``superbody edge run --delay --jitter --fps``), as real nodes do.
 """
 
 from __future__ import annotations
@@ -64,6 +70,10 @@ class DemoConfig:
         kill_at_s: when to kill it, in simulated seconds from the start.
         table: print the live table.
         log_dir: where the processes' logs go (default: a temporary folder).
+        delay_s: every camera's capture-to-delivery delay, seconds (``edge run --delay``).
+        camera_delay_s: camera id -> its own delay, instead of ``delay_s``.
+        jitter_s: the delays' standard deviation, every camera (``edge run --jitter``).
+        camera_fps: camera id -> its capture rate, instead of the site's (``edge run --fps``).
     """
 
     site: str = str(DEFAULT_SITE)
@@ -79,6 +89,28 @@ class DemoConfig:
     table: bool = True
     log_dir: str | None = None
     extra_host_args: tuple[str, ...] = ()
+    delay_s: float = 0.0
+    camera_delay_s: dict[str, float] = field(default_factory=dict)
+    jitter_s: float = 0.0
+    camera_fps: dict[str, float] = field(default_factory=dict)
+
+    def check_cameras(self, site) -> None:
+        """``KeyError`` naming the site's cameras when a per-camera setting names another."""
+        for flag, per_camera in (("--camera-delay", self.camera_delay_s), ("--camera-fps", self.camera_fps)):
+            for cam in per_camera:
+                if cam not in site.camera_ids:
+                    raise KeyError(f"{flag} {cam}=...: camera {cam!r} is not in site {site.name!r}; cameras: {', '.join(site.camera_ids)}")
+
+    def camera_timing(self, camera_id: str) -> dict[str, float | None]:
+        """One camera's delay, jitter and fps (None: the site's)."""
+        return {"delay_s": self.camera_delay_s.get(camera_id, self.delay_s), "jitter_s": self.jitter_s,
+                "fps": self.camera_fps.get(camera_id)}
+
+    def node_args(self, camera_id: str) -> list[str]:
+        """The ``edge run`` timing flags of one camera's node."""
+        t = self.camera_timing(camera_id)
+        args = ["--delay", repr(t["delay_s"]), "--jitter", repr(t["jitter_s"])]
+        return args + (["--fps", repr(t["fps"])] if t["fps"] is not None else [])
 
 
 @dataclass
@@ -103,11 +135,12 @@ class _Score:
 class _Watcher:
     """Subscribes to observations and poses; scores the poses against the simulated truth."""
 
-    def __init__(self, site, world: World, t0_ns: int):
+    def __init__(self, site, world: World, t0_ns: int, fps: dict[str, float] | None = None):
         self.site = site
         self.world = world
         self.t0_ns = t0_ns
-        self.cams = {c.id: SimCamera(world, c.id) for c in site.cameras}
+        # The cameras' own rates: a simulated frame's noise (hence who each view is) follows its frame number.
+        self.cams = {c.id: SimCamera(world, c.id, fps=(fps or {}).get(c.id)) for c in site.cameras}
         self.score = _Score()
         self.lock = threading.Lock()
         self.killed_ns: int | None = None
@@ -239,6 +272,7 @@ def run_demo(cfg: DemoConfig, stop: threading.Event | None = None) -> dict:
 
     stop = stop or threading.Event()
     site = load_site(cfg.site)
+    cfg.check_cameras(site)
     site_file = str(Path(cfg.site).resolve())  # the processes get absolute paths: no dependence on their folder
     log_dir = Path(cfg.log_dir or tempfile.mkdtemp(prefix="superbody-demo-"))
     log_dir.mkdir(parents=True, exist_ok=True)
@@ -252,7 +286,7 @@ def run_demo(cfg: DemoConfig, stop: threading.Event | None = None) -> dict:
         procs["router"] = _spawn(["router", "--listen", endpoint], log_dir / "router.log")
         for cam in site.camera_ids:
             procs[f"camera-{cam}"] = _spawn(["edge", "run", "--site", site_file, "--camera", cam, "--source", "sim",
-                                            "--seed", str(cfg.seed), "--people", str(cfg.people), *common],
+                                            "--seed", str(cfg.seed), "--people", str(cfg.people), *cfg.node_args(cam), *common],
                                            log_dir / f"camera-{cam}.log")
         host_args = ["host", "run", "--site", site_file, "--estimator", cfg.estimator, *common, *cfg.extra_host_args]
         if cfg.model:
@@ -260,7 +294,7 @@ def run_demo(cfg: DemoConfig, stop: threading.Event | None = None) -> dict:
         procs["host"] = _spawn(host_args, log_dir / "host.log")
         print(f"superbody demo: router on {endpoint}, {len(site.cameras)} cameras and the host started; logs in {log_dir}", file=sys.stderr)
 
-        watcher = _Watcher(site, World(site, cfg.people, cfg.seed, epoch_s=anchor * 1e-9), clock.now_ns())
+        watcher = _Watcher(site, World(site, cfg.people, cfg.seed, epoch_s=anchor * 1e-9), clock.now_ns(), cfg.camera_fps)
         tty = sys.stdout.isatty()
         if cfg.table:  # at once: the processes take a few seconds to start and the host to load its model
             print(("\x1b[2J\x1b[H" if tty else "") + watcher.table(0.0) + ("" if tty else "\n"), flush=True)
@@ -291,6 +325,7 @@ def run_demo(cfg: DemoConfig, stop: threading.Event | None = None) -> dict:
             for s in subs:
                 s.undeclare()
         summary = watcher.summary(cfg.people)
+        summary["camera_timing"] = {cam: cfg.camera_timing(cam) for cam in site.camera_ids}
         summary["log_dir"] = str(log_dir)
         if cfg.kill_camera:
             summary["killed_camera"] = cfg.kill_camera

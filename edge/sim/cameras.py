@@ -9,6 +9,7 @@ that into Observations.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import cast
 
@@ -111,12 +112,15 @@ class SimCamera:
     """A simulated camera: turns world time into Observations for one camera of a world.
 
     The noise of each frame is seeded from (world seed, camera index, frame number), so a run
-    is repeatable.
+    is repeatable. ``fps`` replaces the site camera's capture rate (``edge run --fps``): the frame
+    numbers, hence the noise, follow it.
     """
 
-    def __init__(self, world: World, camera_id: str, noise: NoiseModel = NoiseModel(), depth: bool = False):
+    def __init__(self, world: World, camera_id: str, noise: NoiseModel = NoiseModel(), depth: bool = False, fps: float | None = None):
         self.world = world
         self.camera = world.site.camera(camera_id)
+        if fps is not None:
+            self.camera = dataclasses.replace(self.camera, fps=float(fps))
         self.index = world.site.camera_index(camera_id)
         self.noise = noise
         self.depth = depth

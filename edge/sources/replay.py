@@ -18,11 +18,14 @@ original timing:
   ``start_ns``, a stalled machine) is skipped and counted in ``skipped``, as a live camera
   drops what a slow node cannot take;
 - ``loop=True`` starts again at the end: each pass adds the recording's span plus one frame
-  period of the site's fastest camera to the shift, so stamps keep counting up.
+  period of the site's fastest camera to the shift, so stamps keep counting up;
+- ``fps`` thins the camera's frames to a lower rate (edge/sources/subsample.py, ``edge run
+  --fps``); a rate above the camera's recorded one (1 / its median gap between frames) is an error.
 
 Several cameras replayed from one file by separate nodes keep their relative timing only if
-they share ``start_ns``: give every node the same ``--replay-start-ns`` (a few seconds ahead,
-e.g. ``$(( $(date +%s%N) + 5000000000 ))``). Without it each node starts at its own start.
+they share ``start_ns``: give every node the same ``--start-at`` (UNIX seconds, a few seconds
+ahead, e.g. ``$(( $(date +%s) + 5 ))``) or ``--replay-start-ns`` (the same in ns). Without it
+each node starts at its own start.
 
 Opening reads the file through once (the channels and the site's first and last stamps), so a
 long recording takes a moment to open. Errors (``SourceError``, one line naming the file): no
@@ -37,13 +40,16 @@ import math
 import threading
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+
+import numpy as np
 
 from superbody.edge import transport
 from superbody.edge.messages import wire
 from superbody.edge.site import Site
 from superbody.edge.sources.source import Frame, SourceError
+from superbody.edge.sources.subsample import Subsampler
 
 __all__ = ["ReplaySource", "RecordingInfo", "scan_recording"]
 
@@ -61,11 +67,14 @@ class RecordingInfo:
         t0_ns: the earliest observation stamp of the site asked for (MCAP publish time, which
             ``superbody record`` sets to the capture stamp), or None without observations.
         t_end_ns: the latest one, or None.
+        fps: camera of the site asked for -> its recorded frame rate (1 / the median gap between
+            its stamps), for cameras with two stamps or more.
     """
 
     cameras: dict[str, tuple[str, ...]]
     t0_ns: int | None
     t_end_ns: int | None
+    fps: dict[str, float] = field(default_factory=dict)
 
 
 def _observation_topic(topic: str) -> tuple[str, str] | None:
@@ -107,6 +116,7 @@ def scan_recording(path: str | Path, site: str) -> RecordingInfo:
     name = f"replay:{path}"
     f, reader = _open_reader(path, name)
     cameras: dict[str, set[str]] = {}
+    stamps: dict[str, list[int]] = {}
     t0 = t_end = None
     try:
         for _schema, channel, message in reader.iter_messages():
@@ -118,11 +128,17 @@ def scan_recording(path: str | Path, site: str) -> RecordingInfo:
                 t = int(message.publish_time)
                 t0 = t if t0 is None else min(t0, t)
                 t_end = t if t_end is None else max(t_end, t)
+                stamps.setdefault(sc[1], []).append(t)
     except (McapError, ValueError, OSError, EOFError) as e:  # a truncated or corrupt file
         raise SourceError(f"{name}: damaged MCAP file ({type(e).__name__}: {e})") from None
     finally:
         f.close()
-    return RecordingInfo({s: tuple(sorted(c)) for s, c in cameras.items()}, t0, t_end)
+    fps = {}
+    for cam, ts in stamps.items():
+        gaps = np.diff(np.unique(np.asarray(ts, dtype=np.int64)))
+        if len(gaps):
+            fps[cam] = 1e9 / float(np.median(gaps))
+    return RecordingInfo({s: tuple(sorted(c)) for s, c in cameras.items()}, t0, t_end, fps)
 
 
 class ReplaySource:
@@ -137,13 +153,14 @@ class ReplaySource:
             share it.
         loop: start again at the end (stamps keep counting up).
         max_late_s: frames later than this when their time comes are skipped.
+        fps: thin the frames to this rate (None: every frame); at most the recorded rate.
 
     Raises:
         SourceError: see the module docstring.
     """
 
     def __init__(self, path: str | Path, site: Site, camera_id: str, *, start_ns: int | None = None, loop: bool = False,
-                 max_late_s: float = 0.5):
+                 max_late_s: float = 0.5, fps: float | None = None):
         if not (isinstance(max_late_s, (int, float)) and math.isfinite(max_late_s) and 0 < max_late_s <= 60):
             raise ValueError(f"max_late_s must be in (0, 60], got {max_late_s!r}")
         self.path = Path(path)
@@ -151,6 +168,7 @@ class ReplaySource:
         self.site, self.camera_id = site, camera_id
         self.topic = transport.observation_key(site.name, camera_id)
         self.start_ns, self.loop, self.max_late_ns = start_ns, loop, int(max_late_s * _NS)
+        self.target_fps = fps
         self.skipped = 0
         self.rejected = 0
         self._closed = threading.Event()
@@ -165,6 +183,10 @@ class ReplaySource:
             raise SourceError(f"{self.name}: no observations of camera {camera_id!r} of site {site.name!r}; "
                               f"cameras present: {', '.join(present)}")
         assert info.t0_ns is not None and info.t_end_ns is not None
+        self.fps = info.fps.get(camera_id)  # None: a single frame
+        if fps is not None and self.fps is not None and fps > self.fps * 1.01:  # 1%: a recording's jitter
+            raise SourceError(f"--fps {fps:g} is above camera {camera_id}'s recorded frame rate in {self.name} ({self.fps:.3g} fps): "
+                              f"a recording can only be thinned, give --fps in (0, {self.fps:.3g}]")
         self.t0_ns, self.t_end_ns = info.t0_ns, info.t_end_ns
         fastest = max((c.fps for c in site.cameras), default=30.0)
         self.loop_period_ns = (info.t_end_ns - info.t0_ns) + int(_NS / fastest)
@@ -205,11 +227,14 @@ class ReplaySource:
         wait_s = (self.start_ns - time.time_ns()) / _NS
         log.info("%s: camera %s, %.1f s recorded, replay starts %s", self.name, self.camera_id, (self.t_end_ns - self.t0_ns) / _NS,
                  f"in {wait_s:.1f} s" if wait_s > 0 else f"{-wait_s:.1f} s ago (frames later than {self.max_late_ns / _NS:g} s are skipped)")
+        rate = Subsampler(self.target_fps) if self.target_fps is not None else None
         while not self._closed.is_set():
             any_obs = False
             for obs in self._observations():
                 any_obs = True
                 t_ns = obs.stamp_ns + shift
+                if rate is not None and not rate.keep(t_ns):
+                    continue
                 late = time.time_ns() - t_ns
                 if late > self.max_late_ns:
                     self.skipped += 1

@@ -31,13 +31,14 @@ class SimSource:
         clock: the world clock that paces the frames. Its anchor is also the scene's start
             (``World.epoch_s``): a run whose processes share an anchor (``superbody demo``)
             shows the same scene every time.
+        fps: capture rate, frames per second (default: the site camera's ``fps``).
     """
 
     def __init__(self, site: Site, camera_id: str, seed: int = 0, people: int = 3, depth: bool = False,
-                 clock: WorldClock = WorldClock()):
+                 clock: WorldClock = WorldClock(), fps: float | None = None):
         from superbody.edge.sim import SimCamera, World
 
-        self._cam = SimCamera(World(site, people, seed, epoch_s=clock.anchor_ns * 1e-9), camera_id, depth=depth)
+        self._cam = SimCamera(World(site, people, seed, epoch_s=clock.anchor_ns * 1e-9), camera_id, depth=depth, fps=fps)
         self.clock = clock
         self.period_ns = 1e9 / self._cam.camera.fps
         self.phase_ns = self.period_ns * site.camera_index(camera_id) / max(len(site.cameras), 1)

@@ -11,12 +11,14 @@ import json
 import math
 import subprocess
 import sys
+from collections import Counter
 
 import numpy as np
 import pytest
 
 from benchmarks import scenes
 from benchmarks.scenes import MotScorer, Visibility
+from superbody.edge.messages import wire
 from tests.conftest import ROOT
 
 S = 1_000_000_000
@@ -297,3 +299,155 @@ def test_seeds_benchmark_runs_as_its_own_process():
     bad = subprocess.run([sys.executable, "-m", "benchmarks.scene_seeds", "--seeds", "9-1"], cwd=ROOT, capture_output=True, text=True,
                          timeout=60)
     assert bad.returncode == 2 and "--seeds" in bad.stderr
+
+
+# --- camera timing: late and out-of-step deliveries ------------------------------------------
+
+def test_visibility_answers_for_any_instant_in_any_order():
+    vis = Visibility(1, fresh_s=0.5, gap_s=1.0, settle_s=2.5)
+    for t in [*np.arange(0.0, 3.01, 0.1), *np.arange(5.0, 9.01, 0.1)]:  # two runs of sightings, 2 s apart
+        vis.saw([0], int(round(t * 10)) * S // 10)
+    # Asked after every sighting is in: only the sightings up to each instant count.
+    for t, expected in ((2.4, False), (2.6, True), (3.4, True), (3.6, False), (7.4, False), (7.6, True), (1.0, False)):
+        assert vis.countable(int(t * S)).tolist() == [expected], t
+    with pytest.raises(ValueError, match="before the one at"):
+        vis.saw([0], 1 * S)
+
+
+def test_a_matched_person_counts_at_the_published_persons_own_time():
+    # A is published (exactly) as they were when they did not count yet: neither hit nor miss.
+    # B is published as they were when they counted, though they no longer count now: a hit.
+    sc = MotScorer()
+    sc.add(np.stack([TWO, TWO]), np.array([True, False]), [1, 2], np.array([ON_A, ON_B]),
+           countable_at=np.array([[False, False], [True, True]]))
+    s = sc.summary()
+    assert (s["hits"], s["misses"], s["false_positives"], s["countable_person_steps"]) == (1, 0, 0, 1)
+    assert s["coverage"] == 0.5  # what the cameras show at the scoring instant, whatever is published
+
+
+@pytest.fixture(scope="module")
+def k5():
+    """Scene k (5 cameras, 4 people), 5 simulated seconds at 15 fps."""
+    sc = scenes.SCENES["k"]()
+    return sc, scenes.simulate(sc, 5.0, 1)
+
+
+def test_the_truth_is_known_at_any_instant(k5):
+    sc, rec = k5
+    stamp = rec.frames[7][0]
+    assert np.array_equal(rec.truth_at(stamp), rec.truth[stamp])
+    world = scenes.World(scenes.miscalibrated(sc.site, *sc.calibration_error, 1), sc.people, seed=1, period_s=60.0,
+                         epoch_s=scenes.T0_NS / 1e9)
+    between = stamp + 12_345_678  # no frame was captured then
+    assert between not in rec.truth
+    expected = np.array([[p.x, p.y, p.yaw] for p in world.states(between * 1e-9)])
+    np.testing.assert_allclose(rec.truth_at(between), expected)
+    assert rec.truth_at(between).shape == (sc.people, 3)
+
+
+def _per_camera(rec, order):
+    """camera id -> [(capture stamp, delivery ns)] in delivery order."""
+    out: dict[str, list[tuple[int, int]]] = {}
+    for now, j in order:
+        out.setdefault(rec.frames[j][1], []).append((rec.frames[j][0], now))
+    return out
+
+
+def test_late_variants_deliver_every_frame_that_late_in_delivery_order(k5):
+    sc, rec = k5
+    for name, late_ns in (("prompt", 0), ("late0.3", 300_000_000), ("late0.8", 800_000_000)):
+        order = scenes.deliveries(rec, sc.site, scenes.TIMINGS[name], 1)
+        assert sorted(j for _, j in order) == list(range(len(rec.frames)))  # every frame, once
+        assert [now for now, _ in order] == sorted(now for now, _ in order)
+        assert all(now == rec.frames[j][0] + late_ns for now, j in order), name
+    assert [j for _, j in scenes.deliveries(rec, sc.site, scenes.TIMINGS["prompt"], 1)] == list(range(len(rec.frames)))
+
+
+def test_mixed_cameras_are_each_their_own_delay_late_and_in_order(k5):
+    sc, rec = k5
+    order = scenes.deliveries(rec, sc.site, scenes.TIMINGS["mixed"], 1)
+    assert [now for now, _ in order] == sorted(now for now, _ in order)
+    per = _per_camera(rec, order)
+    for delay, cam in zip((0.1, 0.4, 0.8, 1.2, 0.3), sc.site.camera_ids):
+        stamps, nows = map(np.array, zip(*per[cam]))
+        assert list(stamps) == sorted(stamps)  # a camera's own frames never overtake each other
+        late = (nows - stamps) / S
+        assert late.min() >= 0 and abs(np.median(late) - delay) < 0.03, (cam, np.median(late))
+        assert 0.02 < late.std() < 0.08, (cam, late.std())  # 50 ms jitter (a little less where order holds frames back)
+    # Out of step: frames reach the host in another order than they were captured.
+    assert [j for _, j in order] != sorted(j for _, j in order)
+
+
+def test_mixedfps_cameras_capture_at_their_own_rates():
+    sc = scenes.SCENES["k"]()
+    tm = scenes.TIMINGS["mixedfps"]
+    rates = tm.camera_fps(len(sc.site.cameras))
+    assert rates == (25.0, 10.0, 5.0, 25.0, 10.0)
+    rec = scenes.simulate(sc, 2.0, 1, fps=rates)
+    counts = Counter(cam for _, cam, _, _ in rec.frames)
+    assert [counts[c] for c in sc.site.camera_ids] == [50, 20, 10, 50, 20]
+    assert [f[0] for f in rec.frames] == sorted(f[0] for f in rec.frames)
+    per = _per_camera(rec, scenes.deliveries(rec, sc.site, tm, 1))
+    for cam, rate in zip(sc.site.camera_ids, rates):
+        stamps = np.array([s for s, _ in per[cam]])
+        np.testing.assert_allclose(np.diff(stamps), 1e9 / rate, atol=1)
+    assert len(rec.score_at) == 30  # scored on the 15 fps grid whatever the rates
+
+
+class _LaggingHost:
+    """A fake ``Aggregator``: records what it is fed and publishes every true person exactly as they
+    were ``lag_s`` before the step (a host fusing in event time), or nobody (``publish=False``)."""
+
+    instances: list[_LaggingHost] = []
+
+    def __init__(self, rec, lag_s: float, publish: bool = True):
+        self.rec, self.lag_ns, self.publish = rec, int(lag_s * S), publish
+        self.ingested: list[tuple[int, int]] = []  # (capture stamp, now)
+        self.steps: list[int] = []
+        self.rejected: Counter = Counter()
+        self.tracker = type("T", (), {"stats": Counter()})()
+        _LaggingHost.instances.append(self)
+
+    def ingest(self, payload: bytes, key: str, now_ns: int) -> bool:
+        self.ingested.append((wire.decode(payload).stamp_ns, now_ns))
+        return True
+
+    def step(self, now_ns: int):
+        from superbody.host.messages import pose as pose_msg
+
+        self.steps.append(now_ns)
+        at = now_ns - self.lag_ns
+        people = tuple(pose_msg.PersonPose(id=k + 1, x=x, y=y, yaw=yaw, vx=0.0, vy=0.0, yaw_rate=0.0, cov=np.eye(3) * 1e-4,
+                                           confidence=1.0, cameras=("c0",), stamp_ns=at, views=1, estimator="analytic")
+                       for k, (x, y, yaw) in enumerate(self.rec.truth_at(at))) if self.publish else ()
+        return pose_msg.PoseArray("room5", len(self.steps), now_ns, people, 0, ("c0",), "analytic")
+
+
+def test_a_late_replay_feeds_the_host_in_delivery_order_and_scores_each_person_at_its_stamp(k5, monkeypatch):
+    sc, rec = k5
+    tm = scenes.TIMINGS["mixed"]
+    _LaggingHost.instances.clear()
+    monkeypatch.setattr(scenes, "Aggregator", lambda site, est, name, config: _LaggingHost(rec, 1.0))
+    r = scenes.replay(sc, rec, None, "fake", timing=tm, seed=1)
+    host = _LaggingHost.instances[0]
+    order = scenes.deliveries(rec, sc.site, tm, 1)
+    assert host.ingested == [(rec.frames[j][0], now) for now, j in order]  # capture stamps kept, now = delivery
+    assert host.steps == sorted(set(now for now, _ in order))  # a step after each delivery time
+    # Published 1 s in the past, exactly: every hit is exact and nobody who counts is missed.
+    assert r["timing"] == "mixed" and r["hits"] > 0 and r["misses"] == 0 and r["false_positives"] == 0
+    assert r["position_mm_p90"] == pytest.approx(0.0, abs=1e-6) and r["empty_in_view"] == 0.0
+    # A host that publishes nobody: every array while someone counts is empty, every countable person missed.
+    monkeypatch.setattr(scenes, "Aggregator", lambda site, est, name, config: _LaggingHost(rec, 0.0, publish=False))
+    r = scenes.replay(sc, rec, None, "fake", timing=scenes.TIMINGS["late0.8"], seed=1)
+    assert r["empty_in_view"] == 1.0 and r["arrays_in_view"] > 0 and r["recall"] == 0.0 and r["misses"] > 0
+
+
+def test_run_scene_scores_each_timing_under_its_own_key():
+    sc = scenes.run_scene("k", 3.0, 1, ("analytic",), timings=("prompt", "late0.8"))
+    assert list(sc["estimators"]) == ["analytic", "analytic@late0.8"]
+    for key, timing in (("analytic", "prompt"), ("analytic@late0.8", "late0.8")):
+        r = sc["estimators"][key]
+        assert r["timing"] == timing and r["frames_delivered"] == sc["frames"] and r["arrays"] > 0
+        assert 0.0 <= r["empty_in_view"] <= 1.0 or math.isnan(r["empty_in_view"])
+    with pytest.raises(ValueError, match="unknown timing 'late9'; timings: prompt, late0.3, late0.8, mixed, mixedfps"):
+        scenes.run_scene("k", 3.0, 1, ("analytic",), timings=("late9",))

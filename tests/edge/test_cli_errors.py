@@ -47,6 +47,14 @@ CASES = [
     (["demo", "--site", "{d}/latin1.toml"], "demo", "latin1.toml: not UTF-8 text (byte 0xe9 at offset 18, line 2)"),
     (["edge", "run", "--site", "{d}/latin1.toml", "--camera", "1"], "edge run", "latin1.toml: not UTF-8 text"),
     (["demo", "--port", "99999"], "demo", "--port must be in [0, 65535], got 99999"),
+    # the demo's camera timing: ranges, the CAMERA=VALUE form, and camera ids the site has
+    (["demo", "--delay", "40"], "demo", "--delay must be a number in [0, 30], got '40'"),
+    (["demo", "--jitter", "-1"], "demo", "--jitter must be a number in [0, 10], got '-1'"),
+    (["demo", "--camera-delay", "1:0.8"], "demo", "--camera-delay must be CAMERA=SECONDS with SECONDS in [0, 30], got '1:0.8'"),
+    (["demo", "--camera-delay", "1=late"], "demo", "--camera-delay 1=...: SECONDS must be a number in [0, 30], got 'late'"),
+    (["demo", "--camera-fps", "3=0"], "demo", "--camera-fps 3=...: FPS must be a number in [0.1, 1000], got '0'"),
+    (["demo", "--camera-delay", "9=0.5"], "demo", "--camera-delay 9=...: camera '9' is not in site 'wtf-apartment'; cameras: 1, 2, 3"),
+    (["demo", "--camera-fps", "nw=5"], "demo", "--camera-fps nw=...: camera 'nw' is not in site 'wtf-apartment'; cameras: 1, 2, 3"),
 ]
 
 

@@ -29,6 +29,7 @@ class Listener:
 
     def __init__(self, port: int, site: str = "lab-example"):
         self.received: dict[str, list[tuple[float, object]]] = defaultdict(list)
+        self.arrived_ns: dict[str, list[int]] = defaultdict(list)  # wall clock at each arrival, as received
         self.errors: list[str] = []
         self.alive: list[tuple[str, str]] = []
         self.event = threading.Condition()
@@ -39,9 +40,11 @@ class Listener:
 
     def _on_obs(self, sample) -> None:
         try:
+            wall_ns = time.time_ns()
             obs = wire.decode(sample.payload.to_bytes())
             with self.event:
                 self.received[obs.camera].append((time.monotonic(), obs))
+                self.arrived_ns[obs.camera].append(wall_ns)
                 self.event.notify_all()
         except wire.DecodeError as e:
             self.errors.append(str(e))
@@ -112,6 +115,27 @@ def test_nodes_share_the_world_clock(processes, listener):
         # Compare after the same wire rounding.
         assert wire.decode(wire.encode(cam.observe(obs.stamp_ns)[0])).people == obs.people, obs.seq
     assert any(o.people for o in received)
+
+
+def test_a_late_node_delivers_each_observation_after_its_capture_with_its_stamp(processes, listener):
+    """`--delay 0.5 --fps 5`: observations captured on a 5 fps grid arrive ~0.5 s after their
+    capture stamps, in order, and are what any process computes for the same site, seed and instant."""
+    _node(processes, listener.port, "se", "--delay", "0.5", "--fps", "5")
+    got = listener.received["se"]
+    assert listener.wait_for(lambda: len(got) >= 12, timeout=60), f"{len(got)} observations"
+    with listener.event:
+        received = [o for _, o in got]
+        late_s = (np.array(listener.arrived_ns["se"][:len(received)]) - np.array([o.stamp_ns for o in received])) / 1e9
+    assert not listener.errors
+    # Delivered 0.5 s after capture: never before, and not much after (a loaded machine wakes late).
+    assert late_s.min() >= 0.5 and np.median(late_s) < 0.6 and late_s.max() < 0.9, late_s
+    stamps = np.array([o.stamp_ns for o in received])
+    periods = np.diff(stamps) / 200e6  # the capture grid at 5 fps: stamps unchanged by the delay
+    np.testing.assert_allclose(periods, np.round(periods), atol=0.01)
+    assert periods.min() >= 0.99 and [o.seq for o in received] == sorted(o.seq for o in received)
+    cam = SimCamera(World(load_site(SITE), 3, seed=7), "se", fps=5.0)
+    for obs in received[:4]:
+        assert wire.decode(wire.encode(cam.observe(obs.stamp_ns)[0])).people == obs.people, obs.seq
 
 
 def test_node_started_before_the_listener_retries_and_publishes(processes):
@@ -291,6 +315,10 @@ def test_cli_source_errors_are_one_line_and_exit_2(capsys, tmp_path):
     for _ in range(3):
         writer.write(np.zeros((48, 64, 3), np.uint8))
     writer.release()
+    hd = tmp_path / "hd.avi"  # the site camera's size, 15 fps
+    writer = cv2.VideoWriter(str(hd), cv2.VideoWriter_fourcc(*"MJPG"), 15.0, (1280, 720))
+    writer.write(np.zeros((720, 1280, 3), np.uint8))
+    writer.release()
     cases = [  # (arguments, text of the error)
         (["--source", f"video:{small}"], f"--source video:{small} needs --detector, one of blazepose, yolo-pose:PATH.onnx, rtmo:PATH.onnx"),
         (["--detector", "blazepose"], "--detector is for video, webcam and RTSP sources; --source sim detects people itself"),
@@ -304,6 +332,22 @@ def test_cli_source_errors_are_one_line_and_exit_2(capsys, tmp_path):
         (["--source", f"video:{small}", "--detector", "blazepose", "--clock-scale", "2"], "--clock-scale and --clock-anchor-ns are for simulated sources"),
         (["--source", f"video:{small}", "--detector", "blazepose", "--depth"], "--depth is for --source sim and oak"),
         (["--source", "oak", "--detector", "blazepose"], "--detector is for video, webcam and RTSP sources; --source oak"),
+        # camera timing: each flag's range, and the sources each flag is for
+        (["--delay", "-0.1"], "--delay must be a number in [0, 30], got '-0.1'"),
+        (["--delay", "31"], "--delay must be a number in [0, 30], got '31'"),
+        (["--jitter", "nan"], "--jitter must be a number in [0, 10], got 'nan'"),
+        (["--fps", "0"], "--fps must be a number in [0.1, 1000], got '0'"),
+        (["--fps", "fast"], "--fps must be a number in [0.1, 1000], got 'fast'"),
+        (["--start-at", "-5"], "--start-at must be a number in [0, 9.2e+09], got '-5'"),
+        (["--source", "webcam:0", "--detector", "blazepose", "--fps", "5"], "--fps is for --source sim, video, replay, not --source webcam:0"),
+        (["--source", "oak", "--fps", "5"], "--fps is for --source sim, video, replay, not --source oak"),
+        (["--start-at", "1800000000"], "--start-at is for --source video and replay, not --source sim"),
+        (["--source", f"video:{hd}", "--detector", "blazepose", "--fps", "20"],
+         f"--fps 20 is above the frame rate of video:{hd} (15 fps): a file can only be thinned, give --fps in (0, 15]"),
+        (["--source", f"video:{hd}", "--detector", "blazepose", "--start-at", "1", "--replay-start-ns", "1"],
+         "--replay-start-ns is for --source replay, not --source video"),
+        (["--source", f"video:{small}", "--detector", "blazepose", "--fast", "--delay", "0.5"],
+         "--delay and --jitter are for sources paced in real time; --fast reads the file as fast"),
     ]
     for args, message in cases:
         code, err = _cli(capsys, "--site", SITE, "--camera", "nw", *args)
@@ -311,6 +355,37 @@ def test_cli_source_errors_are_one_line_and_exit_2(capsys, tmp_path):
         assert "Traceback" not in err
         lines = [ln for ln in err.splitlines() if ln.startswith("superbody")]
         assert len(lines) == 1 and lines[0].startswith("superbody edge run: error:"), err
+
+
+def test_a_video_at_another_rate_than_the_sites_camera_plays_at_its_own_with_a_warning(tmp_path, caplog):
+    """The file's timing is what happened: a 10 fps file on a 15 fps camera publishes at 10 fps and
+    says so, naming both rates and --fps; with --fps it publishes at that rate without a word."""
+    import logging
+
+    from superbody.edge.node import open_source
+
+    clip = tmp_path / "ten.avi"
+    writer = cv2.VideoWriter(str(clip), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (640, 480))
+    for _ in range(6):
+        writer.write(np.zeros((480, 640, 3), np.uint8))
+    writer.release()
+    site = load_site(WTF_SITE)
+    assert site.camera("1").fps == 15.0
+    spec = SourceSpec("video", str(clip))
+    with caplog.at_level(logging.WARNING, logger="superbody.edge"):
+        src = open_source(spec, site, "1", realtime=False)
+    assert f"camera 1: video:{clip} runs at 10 fps, the site's camera at 15 fps: publishing every frame at the file's 10 fps" in caplog.text
+    assert "--fps F thins it" in caplog.text
+    assert np.allclose(np.diff([f.stamp_ns for f in src.frames()]), 100e6, atol=1)
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="superbody.edge"):
+        src = open_source(spec, site, "1", realtime=False, fps=5.0)
+    assert not caplog.records
+    assert np.allclose(np.diff([f.stamp_ns for f in src.frames()]), 200e6, atol=1)
+    # --start-at reaches the file's capture clock: its first frame is stamped at the start.
+    start = 1_800_000_000 * 10**9
+    src = open_source(spec, site, "1", realtime=False, start_ns=start)
+    assert [f.stamp_ns for f in src.frames()][:2] == [start, start + 100_000_000]
 
 
 def test_cli_detector_that_cannot_open(capsys, tmp_path):

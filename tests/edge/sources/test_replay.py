@@ -129,6 +129,8 @@ def test_replay_errors_are_one_line_and_exit_2(capsys, tmp_path):
     text.write_text("not a recording\n")
     truncated = tmp_path / "cut.mcap"
     truncated.write_bytes(wtf.read_bytes()[:40])
+    fast = tmp_path / "fast.mcap"
+    _record(fast, WTF_SITE, {"1": [T0 + round(k * 1e9 / 15) for k in range(5)]})
     no_obs = tmp_path / "status.mcap"
     with open(no_obs, "wb") as f:
         rec = Recorder(f)
@@ -146,6 +148,10 @@ def test_replay_errors_are_one_line_and_exit_2(capsys, tmp_path):
         ("1", ["--loop"], "--loop is for --source video and replay, not --source sim"),
         ("1", ["--source", f"replay:{wtf}", "--replay-start-ns", "-1"], "--replay-start-ns must be in [0, "),
         ("1", ["--source", f"replay:{wtf}", "--detector", "blazepose"], "--detector is for video, webcam and RTSP sources"),
+        ("1", ["--source", f"replay:{wtf}", "--start-at", "5", "--replay-start-ns", "5"],
+         "--start-at and --replay-start-ns say the same thing: give one"),
+        ("1", ["--source", f"replay:{fast}", "--fps", "20"],
+         f"--fps 20 is above camera 1's recorded frame rate in replay:{fast} (15 fps): a recording can only be thinned, give --fps in (0, 15]"),
     ]
     for camera, args, message in cases:
         code, err = _cli(capsys, "--site", str(WTF_SITE), "--camera", camera, *args)
@@ -162,3 +168,16 @@ def test_replay_refuses_another_image_size(tmp_path):
     small = replace(site, cameras=tuple(replace(c, width=c.width // 2) if c.id == "1" else c for c in site.cameras))
     with pytest.raises(SourceError, match=f"recorded at {cam.width}x{cam.height}, the site's camera is {cam.width // 2}x{cam.height}"):
         ReplaySource(path, small, "1")
+
+
+def test_replay_thinned_to_a_lower_rate_on_a_shared_start(tmp_path):
+    """`--fps 5 --start-at T` on a 15 fps recording: every third observation, the recording's
+    first stamp at T, each frame its own (shifted) stamp."""
+    path = tmp_path / "r.mcap"
+    stamps = [T0 + round(k * 1e9 / 15) for k in range(10)]
+    site = _record(path, WTF_SITE, {"1": stamps})
+    start = time.time_ns() + 100 * 10**6
+    src = ReplaySource(path, site, "1", start_ns=start, fps=5.0)
+    assert src.fps == pytest.approx(15.0, rel=1e-6)
+    got = [f.stamp_ns for f in src.frames()]
+    assert got == [start + s - T0 for s in stamps[::3]]

@@ -107,3 +107,55 @@ def test_a_file_that_is_not_a_video(tmp_path):
     junk.write_bytes(b"\x00" * 1000)
     with pytest.raises(SourceError, match="junk.mp4"):
         VideoSource("video", str(junk), 640, 480)
+
+
+# -- capture rate and a shared capture clock (edge run --fps, --start-at) -----------------------
+
+
+def test_a_file_thinned_to_a_lower_rate_keeps_each_frames_own_stamp(tmp_path):
+    path = write_video(tmp_path / "v.avi", 20, fps=20.0)
+    src = VideoSource("video", str(path), 64, 48, realtime=False, fps=5.0, start_ns=0)
+    frames = list(src.frames())
+    assert [level(f.image) for f in frames] == [0, 4, 8, 12, 16]
+    assert [f.stamp_ns for f in frames] == [i * 50_000_000 for i in (0, 4, 8, 12, 16)]  # the file's times, frame by frame
+    assert src.skipped == 0  # thinning is not a slow node's skipping
+
+
+def test_vtest_thinned_from_10_to_4_fps_is_the_files_frames(tmp_path):
+    """OpenCV's sample video (10 fps) at 4 fps: frames 0, 3, 5, 8, 10, decoded as a plain read decodes them."""
+    from tests.media import VTEST_SIZE, media_path, vtest_frames
+
+    src = VideoSource("video", str(media_path("vtest.avi")), *VTEST_SIZE, realtime=False, fps=4.0, start_ns=0)
+    got = []
+    for f in src.frames():
+        got.append(f)
+        if len(got) == 5:
+            break
+    src.close()
+    assert src.fps == 10.0 and [f.stamp_ns for f in got] == [i * 100_000_000 for i in (0, 3, 5, 8, 10)]
+    expected = vtest_frames([0, 3, 5, 8, 10])
+    for f, i in zip(got, (0, 3, 5, 8, 10)):
+        assert np.array_equal(f.image, expected[i]), i
+
+
+def test_a_rate_above_the_files_is_refused_naming_both(tmp_path):
+    path = write_video(tmp_path / "v.avi", 3, fps=15.0)
+    with pytest.raises(SourceError, match=r"--fps 20 is above the frame rate of video:.*v\.avi \(15 fps\).*give --fps in \(0, 15\]"):
+        VideoSource("video", str(path), 64, 48, fps=20.0)
+
+
+def test_files_given_one_start_share_one_capture_clock(tmp_path):
+    """Two nodes started at different times with the same start stamp frame k of their files alike."""
+    a = write_video(tmp_path / "a.avi", 8, fps=25.0)
+    b = write_video(tmp_path / "b.avi", 8, fps=25.0)
+    start = time.time_ns() + 150_000_000  # shortly ahead, as `--start-at $(( $(date +%s) + 5 ))` is
+    first = VideoSource("video", str(a), 64, 48, start_ns=start)
+    arrivals, stamps_a = [], []
+    for f in first.frames():
+        arrivals.append(time.time_ns())
+        stamps_a.append(f.stamp_ns)
+    second = VideoSource("video", str(b), 64, 48, start_ns=start, realtime=False)  # opened after the first ended
+    stamps_b = [f.stamp_ns for f in second.frames()]
+    assert stamps_a == stamps_b == [start + k * 40_000_000 for k in range(8)]
+    assert arrivals[0] >= start  # nothing before the shared start
+    assert first.skipped == 0
