@@ -60,12 +60,14 @@ the Hungarian algorithm on floor distance within the gate. A true person counts 
 camera reports at least 3 of their joints (what the tracker uses) within the host's freshness
 (0.5 s), once such sightings have gone on for 2.5 s (2 s confirmation + 0.5 s) without a gap over
 1 s. A true person matched to a published person counts or not at that person's own capture
-time; one matched to nobody, at the scoring instant. A published person matched to a true person
-who does not count is neither a hit nor a false positive. ``coverage`` is the share of true
+time; one matched to nobody, at the instant the array describes (its stamp minus its age
+``latency_ns``: the host's watermark, ``host.timeline``; the scoring instant for a host that
+publishes at once). A published person matched to a true person who does not count is neither a
+hit nor a false positive. ``coverage`` is the share of true
 person-steps that count at the scoring instants: what the cameras let the host see.
 
 - ``empty_in_view``: the share of the PoseArrays the host published (one per step) that were
-  empty while someone counted at their publish instant;
+  empty while someone counted at the instant they describe;
 - ``mean_views``: cameras per published person.
 
 - recall = hits / countable person-steps; precision = hits / (hits + false positives), a false
@@ -703,7 +705,8 @@ def replay(scene: Scene, rec: Recording, estimator, name: str, config: HostConfi
     views: list[int] = []
     order = deliveries(rec, site, timing, seed)
     bar = _bar(len(order), f"{scene.key} {name} {timing.name}", progress)
-    published: tuple = ()  # the host's last PoseArray's people
+    published: tuple = ()  # the host's last PoseArray's people ...
+    as_of = 0  # ... and the instant it describes: its stamp minus its age (the host's watermark)
     arrays = in_view = empty_in_view = 0
     todo = iter(rec.score_at)
     s_next = next(todo, None)
@@ -718,20 +721,21 @@ def replay(scene: Scene, rec: Recording, estimator, name: str, config: HostConfi
     while i < len(order):
         now = order[i][0]
         while s_next is not None and s_next < now:  # scored with what the host had published by then
-            score(s_next, published)
+            score(as_of, published)
             s_next = next(todo, None)
         while i < len(order) and order[i][0] == now:
             stamp, cam, payload, _seen = rec.frames[order[i][1]]
             agg.ingest(payload, keys[cam], now)
             i += 1
             bar.update()
-        published = agg.step(now).people
+        arr = agg.step(now)
+        published, as_of = arr.people, arr.stamp_ns - arr.latency_ns
         arrays += 1
-        if vis.countable(now).any():
+        if vis.countable(as_of).any():
             in_view += 1
             empty_in_view += not published
     while s_next is not None:
-        score(s_next, published)
+        score(as_of, published)
         s_next = next(todo, None)
     bar.close()
     out = scorer.summary()
