@@ -20,6 +20,9 @@ is the one part of the host that knows it:
   cameras' newest stamps is in. Bounded by ``max_delay_s``: a camera whose newest frame is older
   than that (dead slow, stalled, gone) holds nobody back; its frames then arrive behind the
   watermark and are dropped as "too_late", counted and reported, never used silently out of time.
+  A camera that joins (its first frame, or its first after a silence) behind the watermark stops
+  it until its frames catch up, at most ``max_delay_s``; the frames it loses meanwhile are counted
+  but are not a problem of its own.
   For the first ``max_delay_s`` after the host starts the watermark waits that long, so a slow
   camera's first frames are not too late for want of having been heard of.
 - **release** (``release``): the admitted frames captured up to the watermark, in capture order
@@ -102,6 +105,7 @@ class CameraTimeline:
     last_arrival_ns: int | None = None
     released_ns: int | None = None
     heard_ns: int | None = None  # newest stamp it delivered, admitted or too late: what the watermark waits for
+    joined_ns: int | None = None  # when it last began delivering (first frame, or first after a silence of max_delay_s)
     _order: _Order | None = None
     _delays: deque[int] = field(default_factory=lambda: deque(maxlen=_DELAYS_KEPT))  # arrival - capture, ns
     _periods: deque[int] = field(default_factory=lambda: deque(maxlen=_PERIODS_KEPT))  # stamp differences, ns
@@ -172,6 +176,8 @@ class Timeline:
         if cam is None:
             return "unknown_camera"
         t, now = int(obs.stamp_ns), int(now_ns)
+        if cam.last_arrival_ns is None or now - cam.last_arrival_ns > self._max_delay_ns:
+            cam.joined_ns = now  # (re)joining: until its frames catch up with the watermark, being too late is expected
         cam.last_arrival_ns = now
         cam._delays.append(now - t)  # of every frame that arrives: a camera too late to be used is measured too
         why = self._refusal(cam, obs, t, now)
@@ -181,7 +187,8 @@ class Timeline:
             cam.heard_ns = t
         if why is not None:
             cam.dropped[why] += 1
-            cam._events.append((now, why))
+            joining = why == "too_late" and cam.joined_ns is not None and now - cam.joined_ns <= self._max_delay_ns
+            cam._events.append((now, "joining" if joining else why))
             if why == "seq_backwards":  # remembered: if the next frame follows it, the node restarted
                 assert cam._order is not None
                 cam._order = cam._order._replace(back_seq=int(obs.seq), back_ns=t)
