@@ -23,7 +23,7 @@ def test_the_time_limit_stops_training_inside_an_epoch(capsys) -> None:
     # Before: the limit was checked only at the end of an epoch, so a run whose epoch takes
     # longer than its limit went on for the whole epoch (the documented 15-minute command took
     # 17.2 min). Here one epoch is 1350 steps of one graph each (3-200 ms a step: 4 s to
-    # minutes), against a limit of 2.4 s; the old code took 8.3 s here (one whole epoch).
+    # minutes), against a limit of 2.4 s; the old code took 12.5 s here (one whole epoch).
     from superbody.models.training.train import TrainConfig, train
     from tests.conftest import WTF_SITE
 
