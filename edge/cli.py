@@ -150,7 +150,7 @@ def _sized_for_site(spec: DetectorSpec, site: Site, camera_id: str) -> DetectorS
     the floor this camera sees (``movenet.short_side_for``); other detectors as they are."""
     if spec.kind != "movenet" or spec.size is not None:
         return spec
-    from superbody.edge.detectors.movenet import DEFAULT_SHORT_SIDE, PERSON_INPUT_PX, network_size, short_side_for
+    from superbody.edge.detectors.movenet import DEFAULT_SHORT_SIDE, PERSON_INPUT_PX, PERSON_PERCENTILES, network_size, short_side_for
 
     cam = site.camera(camera_id)
     choice = short_side_for(cam, site.floor)
@@ -159,10 +159,11 @@ def _sized_for_site(spec: DetectorSpec, site: Site, camera_id: str) -> DetectorS
                     DEFAULT_SHORT_SIDE)
         return spec
     w, h = network_size(cam.width, cam.height, choice.short_side)
-    log.info("camera %s: MoveNet input %d x %d: a standing person is %.0f-%.0f px tall in the image, %.0f-%.0f px in %d x %d "
-             "(found between %.0f and %.0f) on %.0f%% of the floor it sees; movenet@SHORT sets another size", camera_id, w, h,
-             *choice.person_px, *(v * choice.short_side / min(cam.width, cam.height) for v in choice.person_px), w, h,
-             *PERSON_INPUT_PX, 100 * choice.share)
+    seen = f"seen whole (on {100 * choice.whole:.0f}% of the floor it sees)" if choice.whole else "(seen whole nowhere: the part it sees)"
+    log.info("camera %s: MoveNet input %d x %d: a standing person %s is %.0f-%.0f px tall in the image (%.0f-%.0fth percentile), "
+             "%.0f-%.0f px in %d x %d; found between %.0f and %.0f px on %.0f%% of the floor it sees; movenet@SHORT sets another size",
+             camera_id, w, h, seen, *choice.person_px, *PERSON_PERCENTILES, *(v * choice.short_side / min(cam.width, cam.height) for v in choice.person_px),
+             w, h, *PERSON_INPUT_PX, 100 * choice.share)
     return dataclasses.replace(spec, size=choice.short_side)
 
 

@@ -272,7 +272,8 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
         + f"; yaw without a shoulder/hip pair {np.degrees(cal.analytic_yaw_std_no_pair):.0f} deg")
     print("analytic bias by cameras (x mm, y mm, yaw deg), subtracted: " + "; ".join(
         f"{k}: {b[0] * 1000:.0f}, {b[1] * 1000:.0f}, {np.degrees(b[2]):.1f}" for k, b in zip((1, 2, 3), cal.analytic_bias)))
-    print("trust in the network (x, y, yaw) by cameras: " + "; ".join(f"{k}: {', '.join(f'{v:g}' for v in row)}" for k, row in zip((1, 2, 3), cal.net_trust)))
+    trust_samples = hybrid_fit.trust_samples(net, analytic, cams, len(site.cameras))  # every camera count of the site
+    print("\n".join(hybrid_fit.format_trust(cal, trust_samples)))
     for name, cov in coverage.items():
         print(f"{name}: errors within 1 sigma (x, y, yaw) {', '.join(f'{v:.2f}' for v in cov['within_1_sigma'])}; "
               f"within 2 sigma {', '.join(f'{v:.2f}' for v in cov['within_2_sigma'])} (a calibrated Gaussian: 0.68, 0.95)")
@@ -285,7 +286,7 @@ def _run_calibrate_hybrid(args: argparse.Namespace) -> int:
     else:
         print("no int8 figure: not every --cv file has int8 predictions (superbody crossval --int8)")
     if has_int8:
-        print("int8 trust in the network (x, y, yaw) by cameras: " + "; ".join(f"{k}: {', '.join(f'{v:g}' for v in row)}" for k, row in zip((1, 2, 3), fits["int8"][1].net_trust)))
+        print("int8 " + "\n".join(hybrid_fit.format_trust(fits["int8"][1], hybrid_fit.trust_samples(kinds["int8"][0], analytic, cams, len(site.cameras)))))
     for m in args.model:
         kind = "int8" if quantised[m] and has_int8 else "fp32"
         hybrid_fit.write_calibration(m, *fits[kind])

@@ -46,7 +46,8 @@ from superbody.host.estimation.estimator import META_STD_SCALE
 from superbody.host.estimation.hybrid import META_HYBRID, HybridCalibration, combine, fuse
 from superbody.models.data.samples import Sample
 
-__all__ = ["robust_sigma", "fit_std_scale", "scaled_std", "fit_trust", "TRUST_GRID", "POSITION_SE", "fit_analytic", "fit_net_bias", "NET_DEBIAS", "fit_calibration", "hybrid_poses", "leave_one_fold_out", "sigma_coverage", "write_calibration"]
+__all__ = ["robust_sigma", "fit_std_scale", "scaled_std", "fit_trust", "TRUST_GRID", "POSITION_SE", "fit_analytic", "fit_net_bias", "NET_DEBIAS", "fit_calibration", "hybrid_poses", "leave_one_fold_out", "sigma_coverage", "write_calibration",
+           "MIN_TRUST_SAMPLES", "trust_samples", "format_trust"]
 
 _MEDIAN_ABS_Z: Final[float] = 0.6745  # median of |z| for z ~ N(0, 1)
 
@@ -184,8 +185,19 @@ and 68.9 / 70.7 mm overall against 71.3 / 70.0 (2: 68.1 / 71.8). (Chosen on that
 cross-validation.)"""
 
 
+MIN_TRUST_SAMPLES: Final[int] = 10
+"""Samples (both estimates finite) a trust row needs for ``fit_trust`` to fit it; with fewer it
+keeps trust 1 (plain inverse-variance fusion)."""
+
+
+def _usable(net: NDArray, analytic: NDArray) -> NDArray[np.bool_]:
+    """(N,) the samples a trust fit can score: the network's and geometry's poses both finite."""
+    finite: list[NDArray[np.bool_]] = [np.all(np.isfinite(np.asarray(a, np.float64)), axis=1) for a in (net, analytic)]
+    return finite[0] & finite[1]
+
+
 def fit_trust(net: NDArray, net_std: NDArray, analytic: NDArray, pair: NDArray, truth: NDArray, cameras: NDArray,
-              calibration: HybridCalibration, min_samples: int = 10, must_win_alone: bool = False) -> HybridCalibration:
+              calibration: HybridCalibration, min_samples: int = MIN_TRUST_SAMPLES, must_win_alone: bool = False) -> HybridCalibration:
     """The calibration with ``net_trust`` chosen per camera count and per axis (x, y, yaw) from
     ``TRUST_GRID``; 1 where a count has fewer than ``min_samples`` samples. 0 (geometry alone) is
     on the grid, so on the fitted data no axis of any camera count ends worse than geometry.
@@ -217,7 +229,7 @@ def fit_trust(net: NDArray, net_std: NDArray, analytic: NDArray, pair: NDArray, 
     cams = np.clip(np.asarray(cameras), 1, 3)
     geo_std = calibration.analytic_sigmas(cams, pair)
     analytic = calibration.debias(analytic, cams)
-    ok = np.isfinite(analytic).all(1) & np.isfinite(net).all(1)
+    ok = _usable(net, analytic)
     rows: list[tuple[float, float, float]] = []
     for k in (1, 2, 3):
         m = ok & (cams == k)
@@ -238,6 +250,49 @@ def fit_trust(net: NDArray, net_std: NDArray, analytic: NDArray, pair: NDArray, 
             row = [t if a else 0.0 for t, a in zip(row, alone)]
         rows.append(cast("tuple[float, float, float]", tuple(row)))
     return replace(calibration, net_trust=tuple(rows))
+
+
+def trust_samples(net: NDArray, analytic: NDArray, cameras: NDArray, n_cameras: int) -> dict[int, int]:
+    """Per camera count 1..``n_cameras`` (a site's cameras), the samples ``fit_trust`` scores
+    there (both estimates finite): what ``format_trust`` reports beside each trust."""
+    ok = _usable(net, analytic)
+    cams = np.asarray(cameras)
+    return {k: int((ok & (cams == k)).sum()) for k in range(1, max(int(n_cameras), 1) + 1)}
+
+
+def format_trust(calibration: HybridCalibration, samples: dict[int, int], min_samples: int = MIN_TRUST_SAMPLES) -> list[str]:
+    """The trust in the network per camera count of the site, one line each, every count listed.
+
+    The calibration has one trust row for 1, for 2 and for 3 or more cameras (the host clips the
+    count to 3, ``HybridCalibration.trust``): a site with more cameras is listed count by count
+    with the row each count gets, and a row fitted on fewer than ``min_samples`` samples says that
+    its trust is the default, not a fit.
+
+    Args:
+        calibration: the fitted calibration.
+        samples: per camera count 1..N (N: the site's cameras; ``trust_samples``), the samples
+            the fit had.
+
+    Returns:
+        Lines of text, the first a heading, then one per camera count 1..N.
+    """
+    n = max(samples, default=0)
+    lines = ["trust in the network (x, y, yaw) by cameras (0: geometry alone; 1: plain inverse-variance fusion):"]
+    for k in range(1, n + 1):
+        row = min(k, 3)
+        pooled = sum(v for j, v in samples.items() if min(j, 3) == row)
+        trust = ", ".join(f"{v:g}" for v in calibration.net_trust[row - 1])
+        shared = row == 3 and n > 3  # 3, 4, ... N cameras share the 3+ row
+        together = f"3-{n} cameras together: {pooled}" if shared else ""
+        what = f"{k} camera{'s' if k > 1 else ''}: "
+        own = samples.get(k, 0)
+        if pooled < min_samples:
+            lines.append(f"  {what}{trust} by default: too few samples to fit ({own}{'; ' + together if shared else ''}; "
+                         f"the fit needs {min_samples})")
+        else:
+            lines.append(f"  {what}{trust} ({f'{own} samples' if own else 'no samples'}"
+                         + (f"; one trust for 3-{n} cameras, fitted on their {pooled})" if shared else ")"))
+    return lines
 
 
 def fit_calibration(net: NDArray, net_std: NDArray, analytic: NDArray, pair: NDArray, truth: NDArray, cameras: NDArray,

@@ -94,9 +94,11 @@ def calibrate_on_simulation(site: Site, models: Sequence[Path], samples: int = D
         write: write the calibration into each model (False: only fit and score).
 
     Returns:
-        Per model path: ``{"std_scale", "calibration", "reports"}``, reports (hybrid with each
-        floor region held out, network, analytic) as ``models.evaluation.evaluate.summarise``
-        gives them, on the simulated samples.
+        Per model path: ``{"std_scale", "calibration", "samples_by_cameras", "reports"}``:
+        ``samples_by_cameras`` per camera count 1..N of the site (N its cameras) the samples the
+        trust was fitted on (``hybrid_fit.trust_samples``); reports (hybrid with each floor region
+        held out, network, analytic) as ``models.evaluation.evaluate.summarise`` gives them, on
+        the simulated samples, by camera count 1..N.
 
     Raises:
         host.estimation.estimator.ModelMismatchError: a model does not fit the site or has no
@@ -121,25 +123,30 @@ def calibrate_on_simulation(site: Site, models: Sequence[Path], samples: int = D
         pred, std = net.estimate_with_std(views)
         scale, cal = hybrid_fit.fit_calibration(pred, std, analytic, pair, truth, cams, source=source, must_win_alone=True)
         lofo = hybrid_fit.leave_one_fold_out(pred, std, analytic, pair, truth, cams, fold, site, must_win_alone=True)[0]
-        reports = {name: summarise(p, truth, cams, 0.0) for name, p in (("hybrid (held-out regions)", lofo), ("network", pred),
-                                                                       ("analytic", analytic))}
+        counts = range(1, len(site.cameras) + 1)  # every camera count of the site, those with no samples too
+        reports = {name: summarise(p, truth, cams, 0.0, counts) for name, p in (("hybrid (held-out regions)", lofo), ("network", pred),
+                                                                               ("analytic", analytic))}
         if write:
             hybrid_fit.write_calibration(path, scale, cal)
-        out[str(path)] = {"std_scale": scale.tolist(), "calibration": cal, "reports": reports}
+        out[str(path)] = {"std_scale": scale.tolist(), "calibration": cal,
+                          "samples_by_cameras": hybrid_fit.trust_samples(pred, analytic, cams, len(site.cameras)), "reports": reports}
     return out
 
 
 def format_fits(fits: dict[str, Any]) -> str:
-    """What ``calibrate_on_simulation`` fitted, and how it scores on the simulation, as lines of text."""
+    """What ``calibrate_on_simulation`` fitted, and how it scores on the simulation, as lines of
+    text: every camera count of the site, those with too few samples or none said so."""
+    from superbody.models.hybrid_fit import format_trust
+
     lines = []
     for path, f in fits.items():
         cal = f["calibration"]
         lines.append(f"{path}: hybrid calibrated on {cal.source}")
-        lines.append("  trust in the network (x, y, yaw) by cameras: "
-                     + "; ".join(f"{k}: {', '.join(f'{v:g}' for v in row)}" for k, row in zip((1, 2, 3), cal.net_trust)))
+        lines += ["  " + line for line in format_trust(cal, f["samples_by_cameras"])]
+        lines.append("  scored on the simulation (x / y MAE, yaw MAE), all and by cameras:")
         for name, r in f["reports"].items():
-            by = [f"{k} cam {b['position_mae_mm']['x']:.0f} / {b['position_mae_mm']['y']:.0f} mm, {b['yaw_mae_deg']:.1f} deg"
-                  for k, b in r["by_cameras"].items() if b["samples"]]
+            by = [f"{k} cam " + (f"{b['position_mae_mm']['x']:.0f} / {b['position_mae_mm']['y']:.0f} mm, {b['yaw_mae_deg']:.1f} deg"
+                                 if b["samples"] else "no samples") for k, b in r["by_cameras"].items()]
             lines.append(f"  {name:<26} x / y {r['position_mae_mm']['x']:.0f} / {r['position_mae_mm']['y']:.0f} mm, "
                          f"yaw {r['yaw_mae_deg']:.1f} deg; " + "; ".join(by))
     return "\n".join(lines)

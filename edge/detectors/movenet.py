@@ -43,7 +43,7 @@ from superbody.edge.camera import Camera
 from superbody.edge.detectors.base import DetectorError, Letterbox, letterbox, onnx_session, select_people
 
 __all__ = ["MoveNet", "decode_movenet", "network_size", "default_model_path", "short_side_for", "SizeChoice", "DEFAULT_SHORT_SIDE",
-           "SHORT_SIDES", "SITE_SHORT_SIDES", "COLUMNS"]
+           "SHORT_SIDES", "SITE_SHORT_SIDES", "COLUMNS", "person_in_image", "PERSON_PERCENTILES"]
 
 COLUMNS: Final[int] = 3 * NUM_KEYPOINTS + 5  # 56: 17 x (y, x, score), ymin, xmin, ymax, xmax, score
 DEFAULT_SHORT_SIDE: Final[int] = 256
@@ -59,6 +59,9 @@ PERSON_INPUT_PX: Final[tuple[float, float]] = (32.0, 256.0)
 SITE_SHORT_SIDES: Final[range] = range(DEFAULT_SHORT_SIDE, 480 + 1, 32)
 _CELL_M: Final[float] = 0.1
 _SHARE_SLACK: Final[float] = 0.02  # a smaller input within this share of the best is preferred: faster
+_BODY_STEP_M: Final[float] = 0.025  # the standing person's axis is sampled this finely, feet to head
+_NEAR_M: Final[float] = 0.1  # nearer to the camera's plane than this, a point is not seen
+PERSON_PERCENTILES: Final[tuple[float, float]] = (5.0, 95.0)  # the range SizeChoice.person_px reports
 
 
 class SizeChoice(NamedTuple):
@@ -68,46 +71,82 @@ class SizeChoice(NamedTuple):
         short_side: the network input's short side, pixels.
         share: of the floor points the camera sees, those where a standing person is within
             ``PERSON_INPUT_PX`` in the input.
-        person_px: (smallest, largest) visible height of a standing person over those points, in
-            the camera's image, pixels.
+        person_px: (low, high) image length of a standing person, pixels: the
+            ``PERSON_PERCENTILES`` over the floor points where the camera sees the whole person
+            (feet and head in the image; over every point it sees part of one where it sees
+            nobody whole).
+        whole: the share of the floor points the camera sees where it sees the whole person.
     """
 
     short_side: int
     share: float
     person_px: tuple[float, float]
+    whole: float = 1.0
+
+
+def person_in_image(cam: Camera, xy: NDArray) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """How long a standing person (``edge.floor.PERSON_HEIGHT_M``) at each floor point is in the image.
+
+    The person's axis, feet to head, is sampled every ``_BODY_STEP_M`` and projected (with the
+    camera's distortion); its length is that of the samples' path in the image, over the parts in
+    front of the camera and inside the image. So a person cut off at an image edge counts with the
+    part the camera sees, and one seen from above (a ceiling camera) with the length their body
+    makes in the image, whichever way it lies there (not only down the rows).
+
+    Args:
+        cam: the camera.
+        xy: (N, 2) floor points, metres.
+
+    Returns:
+        ``(length_px, whole)``: (N,) the visible length in pixels, and (N,) whether the whole
+        person, feet to head, is in the image.
+    """
+    from superbody.edge.camera import project
+    from superbody.edge.floor import PERSON_HEIGHT_M
+
+    xy = np.asarray(xy, np.float64).reshape(-1, 2)
+    heights = np.linspace(0.0, PERSON_HEIGHT_M, int(round(PERSON_HEIGHT_M / _BODY_STEP_M)) + 1)  # (H,)
+    n, h = len(xy), len(heights)
+    uv, depth = project(np.column_stack([np.repeat(xy, h, axis=0), np.tile(heights, n)]), cam)
+    uv, depth = uv.reshape(n, h, 2), depth.reshape(n, h)  # (N, H, 2), (N, H)
+    inside = (depth > _NEAR_M) & (uv[..., 0] >= 0) & (uv[..., 0] <= cam.width) & (uv[..., 1] >= 0) & (uv[..., 1] <= cam.height)  # (N, H)
+    steps = np.linalg.norm(np.diff(uv, axis=1), axis=2)  # (N, H - 1) pixels between neighbouring samples
+    length = np.where(inside[:, 1:] & inside[:, :-1], steps, 0.0).sum(axis=1)  # (N,)
+    whole: NDArray[np.bool_] = np.all(inside, axis=1)
+    return length, whole
 
 
 def short_side_for(cam: Camera, floor: Sequence[Sequence[float]]) -> SizeChoice | None:
     """The input short side at which MoveNet finds a standing person on most of the floor ``cam`` sees.
 
     Each point of the floor (a 0.1 m grid) that the camera sees (``edge.floor.seen_by``) puts
-    a standing person (1.7 m) in the image; their visible height (clipped at the image's edges)
-    scales with the input. Of ``SITE_SHORT_SIDES`` (the default 256 and up: far people need
-    more pixels) the one with most points inside ``PERSON_INPUT_PX`` wins; a smaller one within
-    2% of its share is taken instead (faster).
+    a standing person (1.7 m) in the image; their visible length (``person_in_image``: clipped at
+    the image's edges, whichever way the body lies in the image) scales with the input. Of
+    ``SITE_SHORT_SIDES`` (the default 256 and up: far people need more pixels) the one with most
+    points inside ``PERSON_INPUT_PX`` wins; a smaller one within 2% of its share is taken instead
+    (faster).
+
+    The person sizes reported (``SizeChoice.person_px``) are those of the people the camera sees
+    whole, as a percentile range: a person cut off at an image edge, or standing under the camera,
+    is as short in the image as the part that shows, down to nothing, which says nothing of the
+    camera's scale.
 
     Returns:
         The choice, or None when the camera sees none of the floor.
     """
-    from superbody.edge.camera import project
-    from superbody.edge.floor import PERSON_HEIGHT_M, floor_points, seen_by
+    from superbody.edge.floor import floor_points, seen_by
 
     xy = floor_points(floor, _CELL_M)
     xy = xy[seen_by(cam, xy)]
     if len(xy) == 0:
         return None
-    feet, z_feet = project(np.column_stack([xy, np.zeros(len(xy))]), cam)
-    head, z_head = project(np.column_stack([xy, np.full(len(xy), PERSON_HEIGHT_M)]), cam)
-    # The visible part of the person, head to feet, rows clipped to the image; a point behind the
-    # camera's plane (depth <= 0) is off the image's far edge along its line of sight.
-    v_feet = np.where(z_feet > 0, feet[:, 1], cam.height)
-    v_head = np.where(z_head > 0, head[:, 1], 0.0)
-    rows = np.abs(np.clip(v_feet, 0, cam.height) - np.clip(v_head, 0, cam.height))  # (N,)
+    length, whole = person_in_image(cam, xy)  # (N,), (N,)
     image_short = min(cam.width, cam.height)
-    shares = np.array([np.mean((rows * s / image_short >= PERSON_INPUT_PX[0]) & (rows * s / image_short <= PERSON_INPUT_PX[1]))
+    shares = np.array([np.mean((length * s / image_short >= PERSON_INPUT_PX[0]) & (length * s / image_short <= PERSON_INPUT_PX[1]))
                        for s in SITE_SHORT_SIDES])
     k = int(np.flatnonzero(shares >= shares.max() - _SHARE_SLACK)[0])
-    return SizeChoice(SITE_SHORT_SIDES[k], float(shares[k]), (float(rows.min()), float(rows.max())))
+    lo, hi = np.percentile(length[whole] if whole.any() else length, PERSON_PERCENTILES)
+    return SizeChoice(SITE_SHORT_SIDES[k], float(shares[k]), (float(lo), float(hi)), float(whole.mean()))
 
 
 def default_model_path() -> Path:

@@ -108,9 +108,13 @@ def geometry_sigmas(site: Site, model: str | Path | None = None) -> HybridCalibr
 
 
 def no_model_message(site: Site) -> str:
-    """What a host on a site without a model runs, and the commands that give the site one."""
+    """What a host on a site without a model runs, the command that trains the site one (with its
+    site file, when the site was loaded from one) and the page that explains it."""
+    import shlex
+
+    site_file = shlex.quote(site.source) if site.source else "<site file>"
     return (f"site {site.name!r} has no model (no --model, no shipped models/{site.name}.fp32.onnx): running geometry alone "
-            f"(--estimator analytic: every pose triangulated from the views; no network). To train one from the site file: "
-            f"superbody train --site SITE.toml --geometry --calibrate-sim --name {site.name} (simulation only; the hybrid calibrated "
-            f"on simulated people of the site), then pass --model build/models/{site.name}.fp32.onnx "
-            f"(docs/deploy.md)")
+            f"(--estimator analytic: every pose triangulated from the views; no network). To train one from the site file, run: "
+            f"superbody train --site {site_file} --geometry --calibrate-sim --name {site.name} (simulation of the site only, no labelled "
+            f"data; the hybrid calibrated on simulated people of the site), then pass --model build/models/{site.name}.fp32.onnx "
+            f"(see docs/install.md#train-a-model-for-the-site)")

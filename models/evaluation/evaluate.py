@@ -157,7 +157,7 @@ def _block(pred_point: NDArray, truth: NDArray) -> dict[str, Any]:
     }
 
 
-def summarise(pred: NDArray, truth: NDArray, cameras: NDArray, truth_offset_m: float) -> dict[str, Any]:
+def summarise(pred: NDArray, truth: NDArray, cameras: NDArray, truth_offset_m: float, counts: Sequence[int] | None = None) -> dict[str, Any]:
     """One estimator's report: overall and by number of cameras.
 
     Args:
@@ -165,6 +165,8 @@ def summarise(pred: NDArray, truth: NDArray, cameras: NDArray, truth_offset_m: f
         truth: (N, 3) the dataset's ground truth (the chest tracker), REP-103.
         cameras: (N,) cameras per sample (``camera_counts``).
         truth_offset_m: how far in front of the torso the truth is (``models.data.wtf.TRUTH_OFFSET_M``).
+        counts: the camera counts to report (None: ``CAMERA_COUNTS``, the dataset's 1-3; a site
+            with N cameras: 1..N).
 
     Returns:
         ``{"samples", "failed", "position_mae_mm": {"x", "y"}, "yaw_mae_deg",
@@ -182,7 +184,8 @@ def summarise(pred: NDArray, truth: NDArray, cameras: NDArray, truth_offset_m: f
     truth, cameras = truth[ok], cameras[ok]
     report = _block(point, truth)
     report["failed"] = int((~ok).sum())
-    report["by_cameras"] = {k: _block(point[cameras == int(k)], truth[cameras == int(k)]) for k in CAMERA_COUNTS}
+    keys = CAMERA_COUNTS if counts is None else tuple(str(int(k)) for k in counts)
+    report["by_cameras"] = {k: _block(point[cameras == int(k)], truth[cameras == int(k)]) for k in keys}
     return report
 
 

@@ -7,13 +7,14 @@ import argparse
 import json
 import math
 import sys
+import time
 from pathlib import Path
 
 from superbody.edge.site import SiteError, load_site
 from superbody.models.training.ensemble import calibration_graphs, load_member
 from superbody.models.training.train import ARCH_DEFAULTS, TrainConfig, _search, save, train
 
-__all__ = ["register", "add_train_args", "config_from_args"]
+__all__ = ["register", "add_train_args", "config_from_args", "format_stages"]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -32,7 +33,9 @@ def _range(text: str) -> tuple[int, int]:
     return a, b
 
 
-def add_train_args(p: argparse.ArgumentParser) -> None:
+def add_train_args(p: argparse.ArgumentParser, after_limit: str = "") -> None:
+    """The options of a training run; ``after_limit`` ends ``--max-minutes``'s help (what the
+    command does outside the limit)."""
     p.add_argument("--site", required=True, help="site file (TOML)")
     p.add_argument("--arch", default="gat", choices=sorted(ARCH_DEFAULTS), help="network (default gat)")
     p.add_argument("--variant", default="site", choices=("site", "rays"), help="features: site cameras one-hot, or world rays (site-independent)")
@@ -54,7 +57,9 @@ def add_train_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--patience", type=int, default=6, help="early stopping patience, epochs")
     p.add_argument("--yaw-weight", type=float, default=1.0, help="weight of the yaw (sin, cos) error against the position error (default 1)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--max-minutes", type=float, default=15.0, help="stop training after this long (default 15)")
+    p.add_argument("--max-minutes", type=float, default=15.0,
+                   help="time limit of a training run: building its data (simulation) and training, checked after every batch; at "
+                        "the limit the epoch stops there and the best weights so far are kept (default 15)" + after_limit)
     p.add_argument("--threads", type=int, default=2, help="torch threads (default 2)")
     p.add_argument("--init", help="start from this checkpoint (.pt): fine-tuning")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
@@ -81,10 +86,19 @@ def _run_train(args: argparse.Namespace) -> int:
         print(f"superbody train: error: {e}", file=sys.stderr)
         return 2
     progress = sys.stderr.isatty() and not args.no_progress
+    start = time.monotonic()
+    stages: list[tuple[str, float]] = []  # (what, minutes), printed at the end
     if args.search:
         cfg = _search(cfg, args.search, progress)
+        stages.append((f"hyper-parameter search ({args.search} trials)", (time.monotonic() - start) / 60))
     result = train(cfg, progress=progress)
+    stopped = {"time limit": f"stopped at the time limit of {cfg.max_minutes:g} min (--max-minutes)",
+               "early stop": f"stopped early (no better validation loss for {cfg.patience} epochs)"}.get(
+                   result.stop, f"{cfg.epochs} epoch{'s' if cfg.epochs > 1 else ''} (--epochs)")
+    stages += [("building the training data", result.data_minutes), (f"training: {stopped}", result.minutes - result.data_minutes)]
+    t = time.monotonic()
     paths = save(result, cfg, args.out, args.name, quantize=not args.no_int8)
+    stages.append(("ONNX export" + ("" if args.no_int8 else " and int8 quantisation"), (time.monotonic() - t) / 60))
     print(f"trained {cfg.arch} ({cfg.variant}{', 3D' if cfg.use_3d else ''}) in {result.minutes:.1f} min, best epoch {result.best_epoch}: "
           f"validation MAE x {1000 * result.val.get('mae_x_m', math.nan):.0f} mm, y {1000 * result.val.get('mae_y_m', math.nan):.0f} mm, "
           f"yaw {result.val.get('yaw_mae_deg', math.nan):.1f} deg")
@@ -93,14 +107,30 @@ def _run_train(args: argparse.Namespace) -> int:
     if args.calibrate_sim:  # the hybrid's calibration from simulation: a site with no labelled data
         from superbody.models.sim_calibration import calibrate_on_simulation, format_fits
 
+        t = time.monotonic()
         models = [p for kind, p in paths.items() if kind in ("fp32", "int8")]
         print(format_fits(calibrate_on_simulation(load_site(cfg.site), models, progress=progress)))
+        stages.append(("hybrid calibration on simulation (--calibrate-sim)", (time.monotonic() - t) / 60))
+    print(format_stages(stages, (time.monotonic() - start) / 60, cfg.max_minutes))
     return 0
 
 
+def format_stages(stages: list[tuple[str, float]], total: float, max_minutes: float) -> str:
+    """The command's time, stage by stage: what ``--max-minutes`` limits and what came after it."""
+    lines = [f"time: {total:.1f} min in all (--max-minutes {max_minutes:g} limits building the data and training)"]
+    lines += [f"  {what}: " + (f"{minutes:.1f} min" if minutes >= 1 else f"{60 * minutes:.0f} s") for what, minutes in stages]
+    return "\n".join(lines)
+
+
 def _register_train(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("train", help="train a pose network from a site (simulation) and optional real data; export ONNX fp32 + int8")
-    add_train_args(p)
+    p = sub.add_parser("train", help="train a pose network from a site (simulation) and optional real data; export ONNX fp32 + int8",
+                       description="Train a pose network from a site (simulation) and optional real data, and export it as ONNX fp32 "
+                                   "and int8. Time: --max-minutes limits building the data and training; the export, int8 "
+                                   "quantisation and --calibrate-sim follow it, and the command ends with the time of each stage "
+                                   "(superbody train --site S --geometry --calibrate-sim, 5 cameras, 2 busy cores: 15.2 min of "
+                                   "data and training, then 37 s more; docs/commands.md, Training time).")
+    add_train_args(p, after_limit=". The ONNX export, int8 quantisation and --calibrate-sim come after it, and the command prints "
+                                  "each stage's time; --search's trials come before it, each limited to 1/(N+1) of it")
     p.add_argument("--search", type=int, default=0, help="random hyper-parameter search: this many short trials first")
     p.add_argument("--out", default="build/models", help="output folder (default build/models)")
     p.add_argument("--name", default="model", help="file name stem (default model)")

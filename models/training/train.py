@@ -15,8 +15,13 @@ places the multi-camera frames were taken). Real ground truth is converted to th
 
 Graphs are built once, keeping x and mask only; each mini-batch rebuilds its adjacency from
 the spec's template. Validation: a random ``val_fraction`` of the training data; the best
-epoch by validation loss is kept (early stopping with ``patience``); training also stops at
-``max_minutes``.
+epoch by validation loss is kept (early stopping with ``patience``).
+
+Time limit: ``max_minutes`` counts from the start of ``train``, so it covers building the
+training data (simulation, graphs) and the training itself. It is checked after every batch:
+once it is reached, the epoch stops there, its weights are validated like a whole epoch's, and
+the best weights so far are kept. What runs after ``train`` (ONNX export, int8 quantisation,
+``superbody train --calibrate-sim``) is outside it; the command prints each stage's time.
 """
 
 from __future__ import annotations
@@ -119,7 +124,14 @@ class TrainConfig:
 
 @dataclass
 class TrainResult:
-    """What a run produced."""
+    """What a run produced.
+
+    Attributes:
+        minutes: the whole run (data and training), what ``max_minutes`` limits.
+        data_minutes: of which building the training data (simulation, graphs).
+        stop: why training stopped: ``"epochs"`` (all done), ``"early stop"`` (no better
+            validation loss for ``patience`` epochs) or ``"time limit"``.
+    """
 
     model: PoseNet
     spec: GraphSpec
@@ -128,6 +140,8 @@ class TrainResult:
     minutes: float
     val: dict
     calibration: list[GraphBatch]
+    data_minutes: float = 0.0
+    stop: str = "epochs"
 
 
 # -- data ------------------------------------------------------------------------------------------
@@ -211,6 +225,8 @@ def train(cfg: TrainConfig, progress: bool = True) -> TrainResult:
 
     from superbody.models.nets import build_model, pose_nll
 
+    t0 = time.monotonic()
+    deadline = t0 + 60.0 * cfg.max_minutes  # checked after every batch: data building counts too
     torch.manual_seed(cfg.seed)
     torch.set_num_threads(cfg.threads)
     rng = np.random.default_rng(cfg.seed)
@@ -224,10 +240,13 @@ def train(cfg: TrainConfig, progress: bool = True) -> TrainResult:
         state = torch.load(cfg.init, map_location="cpu", weights_only=False)
         model.load_state_dict(state["state_dict"])
         log.info("starting from %s", cfg.init)
-    t0 = time.monotonic()
     X, M, Y, R = _datasets(cfg, site, spec, model, progress)
+    data_minutes = (time.monotonic() - t0) / 60
     log.info("training data: %d graphs (%d real), %d nodes x %d features, built in %.1f s",
-             len(X), int(R.sum()), spec.num_nodes, spec.num_features, time.monotonic() - t0)
+             len(X), int(R.sum()), spec.num_nodes, spec.num_features, 60 * data_minutes)
+    if time.monotonic() >= deadline:
+        log.warning("the time limit of %g min was spent building the training data (%.1f min): one training step only; "
+                    "raise --max-minutes or lower --sim-samples", cfg.max_minutes, data_minutes)
     order = rng.permutation(len(X))
     n_val = int(round(cfg.val_fraction * len(X)))
     val, tr = order[:n_val], order[n_val:]
@@ -244,13 +263,16 @@ def train(cfg: TrainConfig, progress: bool = True) -> TrainResult:
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     steps_per_epoch = max(1, math.ceil(len(tr) / cfg.batch_size))
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=cfg.lr, total_steps=cfg.epochs * steps_per_epoch, pct_start=0.1)
-    best: tuple[float, int, dict[str, torch.Tensor] | None] = (math.inf, -1, None)  # (val loss, epoch, state)
+    # (val loss, epoch, state, validation metrics) of the best epoch so far
+    best: tuple[float, int, dict[str, torch.Tensor] | None, dict] = (math.inf, -1, None, {})
     history: list[dict] = []
     stale = 0
+    stop = "epochs"
+    limit = f"{cfg.max_minutes:g} min"
     for epoch in range(cfg.epochs):
         model.train()
         perm = rng.permutation(tr)
-        total = 0.0
+        total, steps = 0.0, 0
         bar = tqdm(range(steps_per_epoch), desc=f"epoch {epoch + 1}/{cfg.epochs}", unit="step", leave=False, disable=not progress)
         for s in bar:
             out, y = forward(perm[s * cfg.batch_size : (s + 1) * cfg.batch_size])
@@ -261,34 +283,44 @@ def train(cfg: TrainConfig, progress: bool = True) -> TrainResult:
             opt.step()
             sched.step()
             total += loss.item()
+            steps = s + 1
+            now = time.monotonic()
             if s % 20 == 0:
-                bar.set_postfix(loss=f"{total / (s + 1):.4f}")
+                bar.set_postfix(loss=f"{total / steps:.4f}", time=f"{(now - t0) / 60:.1f}/{limit}")
+            if now >= deadline:  # within the epoch: an epoch can take minutes
+                stop = "time limit"
+                break
+        bar.close()
         val_out, val_y = _predict(model, forward, val, cfg.batch_size)
         # Early stopping on the pose alone: the uncertainty must not choose the epoch.
-        val_loss = float((((val_out[:, :4] - val_y) ** 2) * w.numpy()).mean()) if len(val) else total / steps_per_epoch
-        row = {"epoch": epoch + 1, "train_loss": total / steps_per_epoch, "val_loss": val_loss, "minutes": (time.monotonic() - t0) / 60,
-               **(_metrics(val_out, val_y, model.scale) if len(val) else {})}
+        val_loss = float((((val_out[:, :4] - val_y) ** 2) * w.numpy()).mean()) if len(val) else total / steps
+        metrics = _metrics(val_out, val_y, model.scale) if len(val) else {}
+        row = {"epoch": epoch + 1, "steps": steps, "train_loss": total / steps, "val_loss": val_loss, "minutes": (time.monotonic() - t0) / 60,
+               **metrics}
         history.append(row)
-        log.info("epoch %d: train %.4f val %.4f | val MAE x %.0f mm y %.0f mm yaw %.1f deg | %.1f min", epoch + 1, row["train_loss"], val_loss,
-                 1000 * row.get("mae_x_m", math.nan), 1000 * row.get("mae_y_m", math.nan), row.get("yaw_mae_deg", math.nan), row["minutes"])
+        log.info("epoch %d%s: train %.4f val %.4f | val MAE x %.0f mm y %.0f mm yaw %.1f deg | %.1f of %s", epoch + 1,
+                 f" ({steps} of {steps_per_epoch} steps)" if steps < steps_per_epoch else "", row["train_loss"], val_loss,
+                 1000 * row.get("mae_x_m", math.nan), 1000 * row.get("mae_y_m", math.nan), row.get("yaw_mae_deg", math.nan), row["minutes"], limit)
         if val_loss < best[0]:
-            best, stale = (val_loss, epoch + 1, {k: v.detach().clone() for k, v in model.state_dict().items()}), 0
+            best, stale = (val_loss, epoch + 1, {k: v.detach().clone() for k, v in model.state_dict().items()}, metrics), 0
         else:
             stale += 1
-        if stale >= cfg.patience:
-            log.info("early stop: no better validation loss for %d epochs", stale)
+        if stop == "time limit" or time.monotonic() >= deadline:
+            stop = "time limit"
+            log.info("time limit of %s reached in epoch %d (%d of %d steps): keeping epoch %d's weights", limit, epoch + 1, steps,
+                     steps_per_epoch, best[1])
             break
-        if (time.monotonic() - t0) / 60 > cfg.max_minutes:
-            log.info("time limit of %.1f min reached", cfg.max_minutes)
+        if stale >= cfg.patience:
+            stop = "early stop"
+            log.info("early stop: no better validation loss for %d epochs", stale)
             break
     model.load_state_dict(best[2])  # type: ignore[arg-type]  # None only if no epoch beat inf (NaN losses): it raises TypeError, as before
     model.eval()
-    val_out, val_y = _predict(model, forward, val, cfg.batch_size)
     calib_idx = rng.choice(tr, size=min(512, len(tr)), replace=False)
     chunks = [calib_idx[i : i + 128] for i in range(0, len(calib_idx), 128)]
     calibration = [GraphBatch(x=X[c], adj=masked_adjacency(spec, M[c]), mask=M[c]) for c in chunks]
     return TrainResult(model=model, spec=spec, history=history, best_epoch=best[1], minutes=(time.monotonic() - t0) / 60,
-                       val=_metrics(val_out, val_y, model.scale) if len(val) else {}, calibration=calibration)
+                       val=best[3], calibration=calibration, data_minutes=data_minutes, stop=stop)
 
 
 def _predict(model, forward, idx: NDArray, batch: int) -> tuple[NDArray, NDArray]:

@@ -212,5 +212,10 @@ def test_a_site_with_no_labelled_data_gets_a_hybrid_calibrated_on_simulation(tin
     for kind in ("fp32", "int8"):
         meta = {p.key: p.value for p in onnx.load(str(tmp_path / f"fresh.{kind}.onnx")).metadata_props}
         assert META_HYBRID in meta, kind
+    # every stage's time: what --max-minutes limits, and what comes after it
+    assert "(--max-minutes 15 limits building the data and training)" in r.stdout
+    for stage in ("building the training data:", "training: 1 epoch (--epochs):", "ONNX export and int8 quantisation:",
+                  "hybrid calibration on simulation (--calibrate-sim):"):
+        assert stage in r.stdout, stage
     r = _cli("calibrate", "hybrid-sim", "--site", str(WTF_SITE), "--model", str(model), "--samples", "10")
     assert r.returncode == 2 and "--samples" in r.stderr and "[500, 100000]" in r.stderr

@@ -27,6 +27,7 @@ from superbody.edge.detectors.movenet import (
     decode_movenet,
     default_model_path,
     network_size,
+    person_in_image,
     short_side_for,
 )
 from tests.conftest import LAB_SITE, free_port
@@ -312,6 +313,90 @@ def test_far_people_get_a_larger_input(f):
 def test_a_camera_that_sees_no_floor_gets_no_size():
     cam, _ = _hall_camera(600.0)
     assert short_side_for(cam, ((-9.0, 0.0), (-8.0, 0.0), (-8.0, 1.0), (-9.0, 1.0))) is None  # behind the camera
+
+
+def _hd_camera(position, target, up=None) -> object:
+    """A 1920 x 1080 camera with a wide lens (f = 576 px: 118 degrees across) at ``position`` aimed at ``target``."""
+    from superbody.edge.camera import Camera, look_at_rotation
+
+    R = look_at_rotation(np.array(position), np.array(target), None if up is None else np.array(up))
+    return Camera(id="c", width=1920, height=1080, fps=15.0, fx=576.0, fy=576.0, cx=960.0, cy=540.0, position=tuple(position),
+                  rotation=tuple(tuple(float(v) for v in row) for row in R))
+
+
+# A 9 x 7 m room whose floor polygon reaches all round the cameras (under and behind them).
+ROOM = ((-1.0, -1.0), (8.0, -1.0), (8.0, 6.0), (-1.0, 6.0))
+SIZED_CAMERAS = [
+    # a ceiling camera looking straight down over a floor grid point (0.1 m cells centred at -0.95 + 0.1 k):
+    # the person under it is a dot, and those beside it lie across the image's rows
+    _hd_camera((3.05, 2.55, 2.8), (3.05, 2.5501, 0.0), up=(1.0, 0.0, 0.0)),
+    # a camera in a corner of the ceiling, looking steeply down into the room
+    _hd_camera((7.9, 5.9, 2.8), (6.0, 4.5, 0.0)),
+    # a camera 2.8 m up on the west wall, steeply down (its lens sees under it); the floor reaches under it
+    _hd_camera((-0.9, 2.5, 2.8), (0.5, 2.5, 0.0)),
+]
+
+
+@pytest.mark.parametrize("cam", SIZED_CAMERAS, ids=["ceiling", "ceiling-corner", "wall"])
+def test_the_person_sizes_reported_are_those_of_people_seen_whole(cam):
+    # Before: rows only, over every floor point with a torso in view: 0 px under the ceiling
+    # camera, 6 px in the corner one's, 19 px for the heads at the wall camera's bottom edge. Now a person's length in the
+    # image in any direction, over the people seen whole, 5th-95th percentile.
+    from superbody.edge.camera import project
+    from superbody.edge.floor import MIN_PERSON_PX, PERSON_HEIGHT_M, floor_points, seen_by
+
+    choice = short_side_for(cam, ROOM)
+    assert choice is not None and 0 < choice.whole < 1
+    low, high = choice.person_px
+    assert MIN_PERSON_PX < low < high <= np.hypot(cam.width, cam.height), choice
+    # Most of the people seen whole are within the range: a person standing where the
+    # camera sees them whole has feet and head in the image, and that is the length reported.
+    xy = floor_points(ROOM, 0.1)
+    xy = xy[seen_by(cam, xy)]
+    feet, zf = project(np.column_stack([xy, np.zeros(len(xy))]), cam)
+    head, zh = project(np.column_stack([xy, np.full(len(xy), PERSON_HEIGHT_M)]), cam)
+    whole = (zf > 0.1) & (zh > 0.1) & np.all((feet >= 0) & (feet <= [cam.width, cam.height]) & (head >= 0) & (head <= [cam.width, cam.height]), axis=1)
+    straight = np.linalg.norm(head - feet, axis=1)[whole]  # the body is nearly straight in the image: distortion is small here
+    assert np.mean((straight >= low - 1) & (straight <= high + 1)) >= 0.85
+    # a camera high above people's heads finds them at the default input size
+    assert choice.short_side == DEFAULT_SHORT_SIDE and choice.share > 0.95
+
+
+# (camera, floor point, what is expected)
+PERSON_IN_IMAGE = [
+    # straight down, a person 1 m to the side along the image's rows: 0 rows, but hundreds of columns
+    (SIZED_CAMERAS[0], (3.05, 3.55), "across"),
+    # under the ceiling camera: a dot
+    (SIZED_CAMERAS[0], (3.05, 2.55), "dot"),
+    # 2.9 m in front of the wall camera: whole
+    (SIZED_CAMERAS[2], (2.0, 2.5), "whole"),
+    # 3.9 m in front of it: the head above the image's top edge, the rest in view
+    (SIZED_CAMERAS[2], (3.0, 2.5), "part"),
+    # 0.6 m behind it (behind its wall): the head at the image's bottom edge
+    (SIZED_CAMERAS[2], (-1.5, 2.5), "part"),
+    # 1.1 m behind it: nothing in the image
+    (SIZED_CAMERAS[2], (-2.0, 2.5), "unseen"),
+]
+
+
+@pytest.mark.parametrize("cam,point,expected", PERSON_IN_IMAGE)
+def test_a_persons_length_in_the_image(cam, point, expected):
+    from superbody.edge.camera import project
+    from superbody.edge.floor import PERSON_HEIGHT_M
+
+    length, whole = person_in_image(cam, np.array([point]))
+    (feet, head), _ = project(np.array([[*point, 0.0], [*point, PERSON_HEIGHT_M]]), cam)
+    if expected == "across":
+        assert abs(head[1] - feet[1]) < 1 and whole[0]
+        assert length[0] == pytest.approx(abs(head[0] - feet[0]), rel=1e-6) and length[0] > 200
+    elif expected == "dot":
+        assert length[0] < 1 and whole[0]
+    elif expected == "whole":
+        assert whole[0] and length[0] == pytest.approx(np.linalg.norm(head - feet), rel=1e-3)
+    elif expected == "part":
+        assert not whole[0] and 0 < length[0] < cam.height
+    else:
+        assert length[0] == 0 and not whole[0]
 
 
 def test_the_node_sizes_movenet_for_its_camera_unless_told():

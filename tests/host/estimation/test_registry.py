@@ -31,6 +31,28 @@ def test_a_site_without_a_model_runs_geometry_and_says_how_to_train_one(new_site
     assert "superbody train --site" in record.getMessage() and "'new-room'" in record.getMessage()
 
 
+def test_the_no_model_message_names_the_training_command_and_its_page(new_site, tmp_path):
+    """The command to run, with the site's own file, whose flags the real ``superbody train``
+    takes, and the install guide's section on training (docs/deploy.md says nothing about it)."""
+    import shlex
+
+    from superbody.edge.cli import build_parser
+    from superbody.host.estimation import no_model_message
+
+    path = tmp_path / "new room.toml"  # a space: the command must still be one the shell runs as is
+    path.write_text(dump_site(new_site))
+    message = no_model_message(load_site(path))
+    assert "docs/install.md#train-a-model-for-the-site" in message and "deploy.md" not in message
+    command = message.split("run: ", 1)[1].split(" (", 1)[0]
+    argv = shlex.split(command)
+    assert argv[:2] == ["superbody", "train"]
+    args = build_parser().parse_args(argv[1:])
+    assert args.site == str(path) and args.geometry and args.calibrate_sim and args.name == "new-room"
+    assert f"--model {args.out}/new-room.fp32.onnx" in message
+    # a site that was not read from a file: a placeholder for it
+    assert "superbody train --site <site file> --geometry --calibrate-sim" in no_model_message(dataclasses.replace(new_site, source=""))
+
+
 @pytest.mark.parametrize("kind", ["onnx", "hybrid"])
 def test_asking_for_the_network_without_a_model_is_an_error_naming_the_command(new_site, kind):
     with pytest.raises(ValueError, match=f"--estimator {kind}: site 'new-room' has no model.*superbody train --site"):
