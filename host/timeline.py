@@ -23,8 +23,9 @@ is the one part of the host that knows it:
   A camera that joins (its first frame, or its first after a silence) behind the watermark stops
   it until its frames catch up, at most ``max_delay_s``; the frames it loses meanwhile are counted
   but are not a problem of its own.
-  For the first ``max_delay_s`` after the host starts the watermark waits that long, so a slow
-  camera's first frames are not too late for want of having been heard of.
+  For the first ``max_delay_s`` after the host starts, until every camera of the site has
+  delivered, the watermark waits that long, so a slow camera's first frames are not too late
+  for want of having been heard of.
 - **release** (``release``): the admitted frames captured up to the watermark, in capture order
   across all cameras, at most ``limit`` at a time (bounded work per tick): the tracker sees the
   world in the order it happened.
@@ -290,8 +291,8 @@ class Timeline:
         if self._start_ns is None:
             self._start_ns = now
         waiting = [c.heard_ns for c in self.cameras.values() if c.heard_ns is not None and c.heard_ns >= floor]
-        if now - self._start_ns < self._max_delay_ns:  # just started: a slow camera may not have spoken yet
-            waiting.append(floor)
+        if now - self._start_ns < self._max_delay_ns and any(c.heard_ns is None for c in self.cameras.values()):
+            waiting.append(floor)  # just started, and a camera has not spoken yet: it may be a slow one
         mark = min(min(waiting) if waiting else floor, now)
         mark = max(mark, floor)
         if self._mark_ns is None or mark > self._mark_ns:

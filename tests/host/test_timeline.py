@@ -191,3 +191,10 @@ def test_the_rate_limit_lets_a_camera_through_at_its_rate_and_drops_a_flood():
             allowed["c2"] += limit.allow("c2", now)
     assert 20 <= allowed["c1"] <= 31 and allowed["c2"] == 10
     assert limit.allow("elsewhere", T0)  # not the site's: the decoder refuses it
+
+
+def test_the_start_up_wait_ends_once_every_camera_has_spoken():
+    tl = timeline(max_delay_s=1.5, start_ns=T0)
+    for k, cam in enumerate(("c1", "c2", "c3")):
+        assert tl.admit(frame(cam, T0 + k * MS, 0), T0 + 50 * MS) is None
+    assert tl.watermark(T0 + 60 * MS) == T0  # the oldest newest frame, not 1.5 s back
