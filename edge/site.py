@@ -35,6 +35,7 @@ tool becomes a site with ``superbody site import`` (edge/calibration/site_import
 
 from __future__ import annotations
 
+import json
 import math
 import re
 import tomllib
@@ -92,6 +93,15 @@ class Site:
     obstacles: tuple[Obstacle, ...] = ()
     source: str = ""
     description: str = ""  # [site].description: free text for people, kept by dump_site
+    # [host] (and its [host.tracker], [host.filter]): the host's settings for this site, as JSON
+    # text (hashable, compared as written); the host reads and checks them (host.settings), the
+    # edge does not know their fields. "" when the file has none.
+    host_json: str = ""
+
+    @property
+    def host(self) -> dict[str, Any]:
+        """The site file's ``[host]`` table (empty when it has none)."""
+        return json.loads(self.host_json) if self.host_json else {}
 
     @property
     def camera_ids(self) -> tuple[str, ...]:
@@ -214,7 +224,7 @@ def _camera(c: Any, i: int, *, path: str) -> Camera:
 
 def parse_site(doc: dict, *, path: str = "") -> Site:
     """Validate a parsed TOML document and build the ``Site``."""
-    _unknown(doc, {"site", "floor", "obstacles", "cameras"}, "top level", path=path)
+    _unknown(doc, {"site", "floor", "obstacles", "cameras", "host"}, "top level", path=path)
     site_t = _table(doc, "site", path=path)
     _unknown(site_t, {"name", "description"}, "[site]", path=path)
     name = _name(site_t.get("name"), "site.name", path=path)
@@ -260,7 +270,9 @@ def parse_site(doc: dict, *, path: str = "") -> Site:
     dupes = sorted({i for i in ids if ids.count(i) > 1})
     if dupes:
         raise SiteError(f"{_where(path, 'cameras')}: camera ids must be unique, repeated: {', '.join(dupes)}")
-    return Site(name=name, cameras=cameras, floor=floor, obstacles=tuple(obstacles), source=path, description=description)
+    host = _table(doc, "host", path=path, required=False)
+    return Site(name=name, cameras=cameras, floor=floor, obstacles=tuple(obstacles), source=path, description=description,
+                host_json=json.dumps(host, sort_keys=True) if host else "")
 
 
 def load_site(path: str | Path) -> Site:
@@ -327,4 +339,8 @@ def dump_site(site: Site, header: str = "") -> str:
             f"position = [{', '.join(map(_fmt, c.position))}]",
             "rotation = [" + ", ".join("[" + ", ".join(map(_fmt, row)) + "]" for row in c.rotation) + "]",
         ]
+    if site.host_json:
+        import tomli_w
+
+        out += ["", tomli_w.dumps({"host": site.host}).rstrip("\n")]
     return "\n".join(out) + "\n"

@@ -11,7 +11,6 @@ import logging
 import math
 import os
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 from superbody.edge.cli_args import (
@@ -32,6 +31,7 @@ from superbody.host.demo import DEFAULT_SITE, DEMO_PORT, DemoConfig, run_demo
 from superbody.host.outputs.record import record
 from superbody.host.outputs.ros2 import _MAX_DOMAIN, Ros2Config, Ros2Publisher, Ros2Sink, _typestore, check_topic
 from superbody.host.outputs.view import run_view
+from superbody.host.tracking.config import TrackerConfig
 
 __all__ = ["register"]
 
@@ -63,19 +63,17 @@ def _run_host(args: argparse.Namespace) -> int:
     from superbody.host.aggregator import Aggregator
     from superbody.host.estimation import build_estimator
     from superbody.host.estimation.estimator import ModelMismatchError
-    from superbody.host.filtering.pose_filter import FilterConfig
     from superbody.host.memory import pin_mmap_threshold
     from superbody.host.service import run_host
-    from superbody.host.tracking.config import TrackerConfig
+    from superbody.host.settings import host_config
 
     try:
         site = load_site(args.site)
         estimator, name = build_estimator(site, args.estimator, args.model)
-        timing = {k: v for k, v in (("freshness_s", args.freshness), ("max_delay_s", args.max_delay)) if v is not None}
-        config = HostConfig(
-            **timing, max_publish_hz=args.max_rate, status_every_s=args.status_every,
-            tracker=replace(TrackerConfig(), d_max=args.d_max, use_geometry=not args.no_geometry),
-            filter=replace(FilterConfig(), enabled=not args.no_filter),
+        config = host_config(
+            site, freshness_s=args.freshness, max_delay_s=args.max_delay, max_publish_hz=args.max_rate, status_every_s=args.status_every,
+            tracker={k: v for k, v in (("d_max", args.d_max), ("use_geometry", False if args.no_geometry else None)) if v is not None},
+            filter={"enabled": False} if args.no_filter else {},
         )
         clock = clock_from_args(args)
         conf = config_from_args(args)
@@ -129,15 +127,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--model", help="ONNX model (default: the shipped models/<site>.fp32.onnx)")
     p.add_argument("--max-delay", type=_seconds_in(0.0, 1.9, "--max-delay"), default=None, metavar="S",
                    help="longest the host waits for a camera's frames after their capture: poses are published this much in the past "
-                        f"at most, and a camera that delivers later is left out and reported (default {HostConfig.max_delay_s})")
+                        f"at most, and a camera that delivers later is left out and reported (default: [host] max_delay_s, else {HostConfig.max_delay_s})")
     p.add_argument("--freshness", type=_seconds_in(0.01, 60.0, "--freshness"), default=None, metavar="S",
                    help="a camera's view stays in a person's set S while captured at most this long before the instant the host fuses "
-                        f"(default {HostConfig.freshness_s})")
-    p.add_argument("--d-max", type=_unit, default=0.65, help="colour match threshold, Bhattacharyya distance (default 0.65)")
+                        f"(default: [host] freshness_s, else {HostConfig.freshness_s})")
+    p.add_argument("--d-max", type=_unit, default=None,
+                   help=f"colour match threshold, Bhattacharyya distance (default: [host.tracker] d_max, else {TrackerConfig.d_max})")
     p.add_argument("--no-geometry", action="store_true", help="match on colour only, as the paper (no ground-point gate)")
     p.add_argument("--no-filter", action="store_true", help="per-frame output: no temporal filtering")
-    p.add_argument("--max-rate", type=float, default=0.0, help="publish at most this many times a second (default: after every batch)")
-    p.add_argument("--status-every", type=positive, default=10.0, help="seconds between status lines (default 10)")
+    p.add_argument("--max-rate", type=float, default=None,
+                   help="publish at most this many times a second (default: [host] max_publish_hz, else after every batch)")
+    p.add_argument("--status-every", type=positive, default=None,
+                   help=f"seconds between status lines (default: [host] status_every_s, else {HostConfig.status_every_s:g})")
     p.add_argument("--serial", metavar="URL", help="also write poses to this serial port (pyserial URL, e.g. /dev/ttyUSB0)")
     p.add_argument("--baud", type=int, default=115200, help="serial baud rate (default 115200)")
     p.add_argument("--duration", type=positive, default=None, help="stop after this many seconds")

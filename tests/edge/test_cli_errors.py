@@ -20,6 +20,7 @@ def files(tmp_path_factory):
     (d / "truncated.onnx").write_bytes((ROOT / "models" / "wtf-apartment.int8.onnx").read_bytes()[:3000])
     (d / "bad.json5").write_text("{mode: ")
     (d / "latin1.toml").write_bytes(b'[site]\nname = "caf\xe9"\n')
+    (d / "host-typo.toml").write_text(WTF_SITE.read_text() + "\n[host.tracker]\ngate = 0.8\n")
     return d
 
 
@@ -36,6 +37,8 @@ CASES = [
     # (argv with {d} for the files' folder, the command named, what the line must name)
     (["host", "run", "--site", SITE, "--model", "{d}/empty.onnx"], "host run", "empty.onnx: not a loadable ONNX model (0 bytes)"),
     (["host", "run", "--site", SITE, "--model", "{d}/truncated.onnx"], "host run", "truncated.onnx: not a loadable ONNX model (3000 bytes)"),
+    (["host", "run", "--site", "{d}/host-typo.toml", "--estimator", "analytic"], "host run", "[host.tracker]: unknown field(s) gate; allowed:"),
+    (["host", "run", "--site", SITE, "--estimator", "analytic", "--max-delay", "3"], "host run", "--max-delay must be a number of seconds in [0.0, 1.9]"),
     (["edge", "run", "--site", SITE, "--camera", "1", "--connect", "foo"], "edge run", "--connect 'foo'"),
     (["edge", "run", "--site", SITE, "--camera", "1", "--connect", ""], "edge run", "--connect ''"),
     (["host", "run", "--site", SITE, "--estimator", "analytic", "--connect", "tcp/127.0.0.1:99999"], "host run", "[1, 65535]"),
