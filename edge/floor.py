@@ -44,9 +44,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from superbody.edge.camera import Camera, project
+from superbody.edge.site import Obstacle, obstacles_hide
 
 __all__ = [
-    "TORSO_HEIGHTS_M", "MIN_PERSON_PX", "PERSON_HEIGHT_M", "LAYOUTS", "detectable_range_m", "seen_by", "views_at", "in_front",
+    "TORSO_HEIGHTS_M", "MIN_PERSON_PX", "PERSON_HEIGHT_M", "LAYOUTS", "detectable_range_m", "visible", "seen_by", "views_at", "in_front",
     "inside_ring", "guess_layout", "visible_floor", "point_in_polygon", "floor_points", "polygon_area",
 ]
 
@@ -68,15 +69,16 @@ def detectable_range_m(cam: Camera, min_person_px: float = MIN_PERSON_PX) -> flo
     return float(cam.fy * PERSON_HEIGHT_M / min_person_px)
 
 
-def seen_by(cam: Camera, xy: NDArray, max_range_m: float | None = None, border: float = 0.02) -> NDArray[np.bool_]:
-    """Which floor points a camera sees part of a standing person's torso at (hips or shoulders).
+def visible(cam: Camera, xy: NDArray, heights: Sequence[float], border: float, max_range_m: float | None = None,
+            obstacles: Sequence[Obstacle] = ()) -> NDArray[np.bool_]:
+    """Which floor points (N, 2) a camera sees a standing person at: the one place visibility is computed.
 
-    Args:
-        cam: the camera.
-        xy: (N, 2) floor points, metres.
-        max_range_m: farthest floor distance from the camera's foot point that counts (None: the
-            detector's limit, ``detectable_range_m``).
-        border: image border left out, as a fraction of the width and height.
+    Seen: at one of ``heights`` (metres above the point) the person projects inside the image
+    less ``border`` (a fraction of its width and height) on each side, in front of the camera,
+    within ``max_range_m`` of the camera's foot point (None: the detector's limit,
+    ``detectable_range_m``), and no obstacle stands between the camera and that point.
+    ``seen_by`` (part of a torso, for coverage and sizing) and the tracker's
+    ``host.tracking.evidence.clearly_sees`` (the torso's centre well inside the image) are two uses.
 
     Returns:
         (N,) bool.
@@ -86,10 +88,18 @@ def seen_by(cam: Camera, xy: NDArray, max_range_m: float | None = None, border: 
     near = np.hypot(xy[:, 0] - cam.t[0], xy[:, 1] - cam.t[1]) <= reach
     bu, bv = border * cam.width, border * cam.height
     seen = np.zeros(len(xy), bool)
-    for h in TORSO_HEIGHTS_M:
-        uv, z = project(np.column_stack([xy, np.full(len(xy), h)]), cam)
-        seen |= (z > 0.1) & (uv[:, 0] >= bu) & (uv[:, 0] <= cam.width - bu) & (uv[:, 1] >= bv) & (uv[:, 1] <= cam.height - bv)
+    for h in heights:
+        points = np.column_stack([xy, np.full(len(xy), h)])
+        uv, z = project(points, cam)
+        inside = (z > 0.1) & (uv[:, 0] >= bu) & (uv[:, 0] <= cam.width - bu) & (uv[:, 1] >= bv) & (uv[:, 1] <= cam.height - bv)
+        seen |= inside & ~obstacles_hide(cam.t, points, obstacles) if obstacles else inside
     return near & seen
+
+
+def seen_by(cam: Camera, xy: NDArray, max_range_m: float | None = None, border: float = 0.02) -> NDArray[np.bool_]:
+    """Which floor points (N, 2) a camera sees part of a standing person's torso at (hips or
+    shoulders), ``border`` of the image left out, within ``max_range_m`` (``visible``)."""
+    return visible(cam, xy, TORSO_HEIGHTS_M, border, max_range_m)
 
 
 def views_at(cameras: Sequence[Camera], xy: NDArray, max_range_m: float | None = None) -> NDArray[np.int64]:

@@ -5,26 +5,26 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal, NamedTuple
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
-from scipy.sparse.csgraph import connected_components
 
 from superbody.edge.colour import bhattacharyya_matrix
+from superbody.host.tracking.config import TrackerConfig
+from superbody.host.tracking.evidence import UNCORROBORATED_COST
+from superbody.host.tracking.motion import NS_PER_S, predict_positions
+from superbody.host.tracking.reid import REID_MARGIN
+from superbody.host.tracking.track import BINS, Track
 
-__all__ = ["Match", "FrameViews", "assign", "clearly_best", "median_colour_distance", "duplicate_views", "DUPLICATE_SPREAD"]
+if TYPE_CHECKING:
+    from superbody.host.tracking.measure import FrameViews
 
-# Two skeletons of one frame whose shared joints lie on average within this fraction of the
-# skeleton's height of each other are one detection: people standing side by side are a body
-# width apart (about a quarter of their height), a detector's double report or a replayed copy
-# a few pixels.
-DUPLICATE_SPREAD = 0.1
-# Fewer shared joints than this cannot tell a copy from a neighbour.
-_MIN_SHARED_JOINTS = 5
-# A skeleton's height in pixels is at least this (a few joints close together say little).
-_MIN_HEIGHT_PX = 20.0
+__all__ = ["Match", "associate", "assign", "amplitudes", "clearly_best", "median_colour_distance", "median_over_history"]
+
+# A cue we cannot compute (empty histogram, no ground point) costs this much, normalised.
+_UNKNOWN_COST = 0.5
 
 
 @dataclass(frozen=True)
@@ -50,19 +50,6 @@ class Match:
     status: Literal["matched", "created", "ignored"]
     colour_distance: float = math.nan
     ground_distance_m: float = math.nan
-
-
-class FrameViews(NamedTuple):
-    """One frame's usable views (K of its N people), as ``Tracker._measure`` finds them."""
-
-    idx: NDArray[np.intp]  # (K,) indices into the frame's people
-    n_joints: NDArray[np.intp]  # (N,) detected joints of every person of the frame
-    ground: NDArray[np.float64]  # (K, 2) ground points
-    sigma: NDArray[np.float64]  # (K,) their 1-sigma, NaN: none
-    has_ground: NDArray[np.bool_]  # (K,)
-    hists: NDArray[np.float32]  # (K, B) flattened histograms
-    has_colour: NDArray[np.bool_]  # (K,) False for an empty histogram
-    amps: NDArray[np.float64]  # (K, B) their amplitudes (association.py)
 
 
 def assign(cost: NDArray, feasible: NDArray, first: NDArray | None = None) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
@@ -94,7 +81,7 @@ def assign(cost: NDArray, feasible: NDArray, first: NDArray | None = None) -> tu
     return rows[keep], cols[keep]
 
 
-def _amplitudes(hists: NDArray) -> NDArray[np.float64]:
+def amplitudes(hists: NDArray) -> NDArray[np.float64]:
     """Histograms (N, B) as unit vectors sqrt(h) / |sqrt(h)| (zeros for an empty one).
 
     The dot product of two is their Bhattacharyya coefficient, exactly as in
@@ -106,7 +93,7 @@ def _amplitudes(hists: NDArray) -> NDArray[np.float64]:
     return a / np.where(norm > 0, norm, 1.0)
 
 
-def _median_over_history(d: NDArray, counts: NDArray) -> NDArray[np.float64]:
+def median_over_history(d: NDArray, counts: NDArray) -> NDArray[np.float64]:
     """Median over each track's used history rows: (N, M, Q) distances, (M,) counts -> (N, M), NaN for count 0."""
     q, m = d.shape[2], d.shape[1]
     d[:, np.arange(q)[None, :] >= counts[:, None]] = np.inf  # unused rows sort last
@@ -148,44 +135,66 @@ def median_colour_distance(hists: NDArray, history: NDArray, counts: NDArray) ->
     hists = np.asarray(hists).reshape(n, -1)
     q = history.shape[1]
     d = bhattacharyya_matrix(hists, history.reshape(m * q, -1)).reshape(n, m, q)  # (N, M, Q)
-    med = _median_over_history(d, np.asarray(counts))
+    med = median_over_history(d, np.asarray(counts))
     med[~(hists.sum(axis=1) > 0)] = np.nan
     return med
 
 
-def duplicate_views(keypoints: NDArray, n_joints: NDArray) -> NDArray[np.bool_]:
-    """Which of one frame's K skeletons repeat another: the same person reported more than once.
+def associate(t: int, tracks: list[Track], views: FrameViews, cfg: TrackerConfig) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
+    """Cost, feasibility and joint assignment of a frame's K views to M tracks at time ``t``.
 
-    Two skeletons are close when they share at least ``_MIN_SHARED_JOINTS`` detected joints and
-    those joints lie, on average, within ``DUPLICATE_SPREAD`` of the taller one's height (the
-    vertical extent of its joints) of each other. Closeness links skeletons into groups
-    (transitively: a chain of copies a few pixels apart is one group however long it is); each
-    group keeps the skeleton with the most detected joints (ties: the first in the frame).
-    People side by side are a body width apart and never link.
+    The cost: the colour distance over ``d_max`` (the paper's rule: feasible below it) plus, with
+    ``use_geometry``, ``geometry_weight`` times the ground distance over the gate (feasible within
+    ``gate_m`` plus the view's and the prediction's sigma), a cue that cannot be computed costing
+    ``_UNKNOWN_COST``, and ``UNCORROBORATED_COST`` for a candidate its cameras do not corroborate.
+    A pair is feasible only if a cue vouches for it: colours that point to that track
+    (``clearly_best``) or a ground point surer than ``gate_m``. Confirmed people are assigned first;
+    candidates then take the views left (``assign``).
 
     Args:
-        keypoints: (K, 17, 2) pixel coordinates, NaN for joints not detected.
-        n_joints: (K,) detected joints of each.
+        views: the frame's views (``host.tracking.measure``).
 
     Returns:
-        (K,) True for the copies.
+        ``(rows, cols, colour_d, geo_d, near)``: matched view and track indices, the (K, M)
+        colour and ground distances (NaN where unknown), and (K, M) whether each view's
+        ground point lies inside each track's gate (all False without geometry).
     """
-    k = len(keypoints)
-    if k < 2:
-        return np.zeros(k, dtype=bool)
-    vis = np.isfinite(keypoints).all(axis=2)  # (K, 17)
-    v = np.where(vis, keypoints[:, :, 1], np.nan)
+    amps, has_colour, ground, sigma, has_ground = views.amps, views.has_colour, views.ground, views.sigma, views.has_ground
+    k, m = len(amps), len(tracks)
+    geo_d = np.full((k, m), np.nan)
+    near = np.zeros((k, m), dtype=bool)
+    if m == 0:
+        return np.empty(0, np.intp), np.empty(0, np.intp), np.full((k, 0), np.nan), geo_d, near
+    q = cfg.history_q
+    rows_of = [tr.colour_rows for tr in tracks]
+    history = np.array([a for a, _ in rows_of]).reshape(m * q, BINS)  # (M*Q, B)
+    counts = np.array([n for _, n in rows_of])  # (M,)
+    # d = sqrt(1 - BC), BC the dot product of amplitudes (see amplitudes)
+    d = np.sqrt(np.clip(1.0 - amps @ history.T, 0.0, 1.0)).reshape(k, m, q)  # (K, M, Q)
+    colour_d = median_over_history(d, counts)  # (K, M)
+    colour_d[~has_colour] = np.nan
+    colour_known = ~np.isnan(colour_d)
     with np.errstate(invalid="ignore"):
-        height = np.maximum(np.nanmax(v, axis=1) - np.nanmin(v, axis=1), _MIN_HEIGHT_PX)  # (K,)
-    shared = vis[:, None, :] & vis[None, :, :]  # (K, K, 17)
-    d = np.linalg.norm(np.where(shared[..., None], keypoints[:, None] - keypoints[None, :], 0.0), axis=3)  # (K, K, 17)
-    n_shared = shared.sum(axis=2)  # (K, K)
-    mean_d = d.sum(axis=2) / np.maximum(n_shared, 1)  # (K, K)
-    close = (n_shared >= _MIN_SHARED_JOINTS) & (mean_d <= DUPLICATE_SPREAD * np.maximum(height[:, None], height[None, :]))
-    _, group = connected_components(close, directed=False)  # (K,) group of each skeleton
-    best: dict[int, int] = {}
-    for i in np.argsort(-np.asarray(n_joints), kind="stable").tolist():
-        best.setdefault(int(group[i]), i)
-    keep = np.zeros(k, dtype=bool)
-    keep[list(best.values())] = True
-    return ~keep
+        feasible = ~colour_known | (colour_d < cfg.d_max)  # (K, M)
+    cost = np.where(colour_known, colour_d / cfg.d_max, _UNKNOWN_COST)
+    vouched = colour_known
+    if cfg.use_geometry:
+        states = [tr.motion for tr in tracks]
+        has_pos = np.array([st is not None for st in states], dtype=bool)  # (M,)
+        pos, pos_std = np.full((m, 2), np.nan), np.full(m, np.nan)
+        if has_pos.any():
+            known = [st for st in states if st is not None]
+            x, P = predict_positions(np.array([st[0] for st in known]), np.array([st[1] for st in known]),
+                                     np.array([(t - st[2]) / NS_PER_S for st in known]), cfg.accel_std_mps2)
+            pos[has_pos], pos_std[has_pos] = x[:, 0, :], np.sqrt(P[:, 0, 0])
+        geo_d = np.linalg.norm(ground[:, None, :] - pos[None, :, :], axis=2)  # (K, M)
+        radius = cfg.gate_m + np.hypot(sigma[:, None], pos_std[None, :])  # (K, M)
+        geo_known = has_ground[:, None] & has_pos[None, :]
+        with np.errstate(invalid="ignore"):
+            near = geo_known & (geo_d <= radius)
+            feasible &= ~geo_known | near
+            cost += cfg.geometry_weight * np.where(geo_known, geo_d / radius, _UNKNOWN_COST)
+        vouched = clearly_best(colour_d, REID_MARGIN) | (geo_known & (sigma < cfg.gate_m)[:, None])
+    cost += UNCORROBORATED_COST * np.array([not tr.corroborated(cfg.confirm_min_support) for tr in tracks])[None, :]
+    rows, cols = assign(cost, feasible & vouched, first=np.array([tr.state == "confirmed" for tr in tracks], dtype=bool))
+    return rows, cols, colour_d, geo_d, near

@@ -43,10 +43,10 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from superbody.edge.camera import Camera, project
-from superbody.edge.floor import detectable_range_m
-from superbody.edge.site import Obstacle, obstacles_hide
-from superbody.host.tracking.motion import _NS_PER_S
+from superbody.edge.camera import Camera
+from superbody.edge.floor import visible
+from superbody.edge.site import Obstacle
+from superbody.host.tracking.motion import NS_PER_S
 from superbody.host.tracking.track import StampedView, Track
 
 __all__ = ["EDGE_MARGIN", "MERGE_AFTER_S", "TORSO_CENTRE_M", "UNCORROBORATED_COST", "clearly_sees", "corroborated", "too_close", "coincident", "seen_together", "one_body", "set_s_of_one_body"]
@@ -69,23 +69,16 @@ def clearly_sees(cam: Camera, xy: NDArray, obstacles: Sequence[Obstacle] = ()) -
 
     Clearly: their torso centre projects inside the image less ``EDGE_MARGIN`` on each side,
     in front of the camera, within ``edge.floor.detectable_range_m``, and no obstacle of the
-    site (a shelf, a pillar) stands between the camera and it. Other people are not modelled.
+    site (a shelf, a pillar) stands between the camera and it (``edge.floor.visible``). Other
+    people are not modelled.
     """
-    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-    if not len(xy):
-        return np.zeros(0, dtype=bool)
-    centre = np.column_stack([xy, np.full(len(xy), TORSO_CENTRE_M)])
-    uv, z = project(centre, cam)
-    mu, mv = EDGE_MARGIN * cam.width, EDGE_MARGIN * cam.height
-    inside = (uv[:, 0] >= mu) & (uv[:, 0] <= cam.width - mu) & (uv[:, 1] >= mv) & (uv[:, 1] <= cam.height - mv)
-    near = np.hypot(xy[:, 0] - cam.t[0], xy[:, 1] - cam.t[1]) <= detectable_range_m(cam)
-    return np.asarray((z > 0.1) & inside & near & ~obstacles_hide(cam.t, centre, obstacles), dtype=bool)
+    return visible(cam, xy, (TORSO_CENTRE_M,), EDGE_MARGIN, obstacles=obstacles)
 
 
 def corroborated(tr: Track, min_support: float) -> bool:
     """Whether the cameras that clearly see where a candidate stands matched it in ``min_support``
     of their frames since its steady matches began (the evidence rule; a person is corroborated)."""
-    return tr.state == "confirmed" or tr._support >= min_support * tr._chances
+    return tr.corroborated(min_support)
 
 
 def too_close(xy: NDArray, others: Sequence[NDArray] | NDArray, min_separation_m: float) -> NDArray[np.bool_]:
@@ -100,21 +93,21 @@ def too_close(xy: NDArray, others: Sequence[NDArray] | NDArray, min_separation_m
 def coincident(people: Sequence[Track], now_ns: int, min_separation_m: float) -> list[Track]:
     """The confirmed tracks that stood within ``min_separation_m`` of an older one for ``MERGE_AFTER_S``.
 
-    Older: confirmed earlier (then the lower id). Each track's ``_close_since_ns`` keeps when it
+    Older: confirmed earlier (then the lower id). Each track's ``close_since_ns`` keeps when it
     came that close (None while it stands apart); a track found here is the younger of a pair
     and is to be removed, so it is no longer anyone's elder.
     """
-    placed = sorted((tr for tr in people if tr._kf_t is not None), key=lambda tr: (tr.confirmed_ns or 0, tr.id))
-    xy = np.array([tr._kf_x[0] for tr in placed]).reshape(-1, 2)
+    placed = sorted((tr for tr in people if tr.motion is not None), key=lambda tr: (tr.confirmed_ns or 0, tr.id))
+    xy = np.array([tr.position for tr in placed]).reshape(-1, 2)
     close = np.linalg.norm(xy[:, None] - xy[None], axis=2) < min_separation_m  # (M, M)
     out: list[Track] = []
     for j, tr in enumerate(placed):
         elders = [placed[i] for i in np.flatnonzero(close[j, :j])]  # older and close: only these pairs are checked
         if not any(o not in out and not seen_together(o, tr) for o in elders):
-            tr._close_since_ns = None
+            tr.close_since_ns = None
             continue
-        tr._close_since_ns = now_ns if tr._close_since_ns is None else tr._close_since_ns
-        if now_ns - tr._close_since_ns >= MERGE_AFTER_S * _NS_PER_S:
+        tr.close_since_ns = now_ns if tr.close_since_ns is None else tr.close_since_ns
+        if now_ns - tr.close_since_ns >= MERGE_AFTER_S * NS_PER_S:
             out.append(tr)
     return out
 
@@ -196,8 +189,8 @@ def set_s_of_one_body(tr: Track, fresh: dict[str, StampedView], sigmas: float, a
         The cameras kept, and how many views this call newly left out (0 for a set checked before).
     """
     key = tuple((cam, sv.stamp_ns) for cam, sv in fresh.items())
-    if tr._body is not None and tr._body[0] == key:
-        return tr._body[1], 0
+    if tr.checked_set is not None and tr.checked_set[0] == key:
+        return tr.checked_set[1], 0
     kept = one_body(fresh, tr.position, sigmas, across_m)
-    tr._body = key, kept
+    tr.checked_set = key, kept
     return kept, len(fresh) - len(kept)

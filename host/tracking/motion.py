@@ -16,7 +16,7 @@ if TYPE_CHECKING:
 
 __all__ = ["predict_positions", "update_positions", "fuse_positions", "INIT_SPEED_STD"]
 
-_NS_PER_S = 1_000_000_000
+NS_PER_S = 1_000_000_000
 
 # Speed we assume for a track whose velocity is not yet known (1-sigma, m/s).
 INIT_SPEED_STD = 1.0
@@ -63,25 +63,23 @@ def fuse_positions(tracks: list[Track], xy: NDArray, sigma: NDArray, t_ns: int |
     stamps = [int(t_ns)] * len(tracks) if np.ndim(t_ns) == 0 else [int(v) for v in cast("NDArray", t_ns)]  # (B,)
     rows: list[int] = []  # tracks with a state: predicted, then updated in one batch
     for j, tr in enumerate(tracks):
-        if tr._kf_t is None:  # first point: the velocity is unknown
-            tr._kf_t = stamps[j]
-            tr._kf_x = np.vstack([xy[j], np.zeros(2)])
-            tr._kf_P = np.diag([sigma[j] ** 2, INIT_SPEED_STD**2])
+        if tr.motion is None:  # first point: the velocity is unknown
+            tr.set_motion(np.vstack([xy[j], np.zeros(2)]), np.diag([sigma[j] ** 2, INIT_SPEED_STD**2]), stamps[j])
         else:
             rows.append(j)
     if not rows:
         return
-    old = [tracks[j] for j in rows]
+    old = [cast(tuple, tracks[j].motion) for j in rows]
     if len(rows) < len(tracks):
         xy, sigma = xy[rows], sigma[rows]
     t_old = [stamps[j] for j in rows]
-    x = np.array([tr._kf_x for tr in old])  # (B, 2, 2)
-    P = np.array([tr._kf_P for tr in old])  # (B, 2, 2)
-    dt = np.array([t - cast(int, tr._kf_t) for t, tr in zip(t_old, old, strict=True)], dtype=np.float64) / _NS_PER_S  # (B,)
+    x = np.array([m[0] for m in old])  # (B, 2, 2)
+    P = np.array([m[1] for m in old])  # (B, 2, 2)
+    dt = np.array([t - m[2] for t, m in zip(t_old, old, strict=True)], dtype=np.float64) / NS_PER_S  # (B,)
     x, P = predict_positions(x, P, np.maximum(dt, 0.0), accel_std_mps2)
     # A point older than the state (another camera's frame came late) is applied at the state's
     # time, with the distance the person may have walked since as extra noise.
     R = sigma**2 + (INIT_SPEED_STD * np.minimum(dt, 0.0)) ** 2  # (B,)
     x, P = update_positions(x, P, xy, R)
-    for j, tr in enumerate(old):
-        tr._kf_x, tr._kf_P, tr._kf_t = x[j], P[j], max(cast(int, tr._kf_t), t_old[j])
+    for j, (i, m) in enumerate(zip(rows, old, strict=True)):
+        tracks[i].set_motion(x[j], P[j], max(m[2], t_old[j]))

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from superbody.host.tracking.config import TrackerConfig
-from superbody.host.tracking.motion import _NS_PER_S
+from superbody.host.tracking.motion import NS_PER_S
 from superbody.host.tracking.track import Track
 
 __all__ = ["Lost", "REID_MARGIN", "remembered_as"]
@@ -44,15 +44,14 @@ def remembered_as(tr: Track, t: int, lost: Iterable[Lost], present: Iterable[Tra
         present: the other confirmed people now (certainly not the lost one).
         cfg: the tracker's parameters.
     """
-    n = min(tr._n_hist, cfg.history_q)
-    if n == 0:
+    mine = tr.colours  # (n, B)
+    if not len(mine):
         return None
-    mine = tr._amp[:n]  # (n, B): the ring buffer's used rows
     pos = tr.position
     scored: list[tuple[float, Lost]] = []
     for person in lost:
         if pos is not None and person.position is not None:
-            reach = cfg.gate_m + cfg.reid_speed_mps * (t - person.last_seen_ns) / _NS_PER_S
+            reach = cfg.gate_m + cfg.reid_speed_mps * (t - person.last_seen_ns) / NS_PER_S
             if np.linalg.norm(pos - person.position) > reach:
                 continue
         # d = sqrt(1 - BC) for every pair of histories; the median is robust to odd views
@@ -64,10 +63,10 @@ def remembered_as(tr: Track, t: int, lost: Iterable[Lost], present: Iterable[Tra
     # Lighting differs between cameras, so the scale of "same colours" does too: the people
     # present now are certainly not the lost one, and must all look clearly less like it.
     for other in present:
-        m = min(other._n_hist, cfg.history_q)
-        if m == 0:
+        theirs = other.colours
+        if not len(theirs):
             continue
-        d = np.sqrt(np.clip(1.0 - mine @ other._amp[:m].T, 0.0, 1.0))
+        d = np.sqrt(np.clip(1.0 - mine @ theirs.T, 0.0, 1.0))
         if float(np.median(d)) - scored[0][0] < REID_MARGIN:
             return None
     return scored[0][1]

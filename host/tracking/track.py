@@ -11,11 +11,11 @@ from numpy.typing import NDArray
 
 from superbody.edge.colour import HIST_BINS
 from superbody.edge.messages.observation import PersonView
-from superbody.host.tracking.motion import _NS_PER_S, predict_positions
+from superbody.host.tracking.motion import NS_PER_S, predict_positions
 
 __all__ = ["StampedView", "Track"]
 
-_BINS = HIST_BINS[0] * HIST_BINS[1]
+BINS = HIST_BINS[0] * HIST_BINS[1]
 
 
 class StampedView(NamedTuple):
@@ -67,13 +67,14 @@ class Track:
     # where the candidate stood, or matched it (chances), and those that matched it.
     _chances: int = field(default=1, init=False, repr=False)
     _support: int = field(default=1, init=False, repr=False)
-    _close_since_ns: int | None = field(default=None, init=False, repr=False)  # confirmed: inside another since
+    # Confirmed: since when it has stood inside an older confirmed track (host.tracking.evidence.coincident).
+    close_since_ns: int | None = field(default=None, init=False, repr=False)
     # Set S as last checked (evidence.one_body): its (camera, stamp) pairs, and the cameras kept.
-    _body: tuple[tuple[tuple[str, int], ...], list[str]] | None = field(default=None, init=False, repr=False)
+    checked_set: tuple[tuple[tuple[str, int], ...], list[str]] | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
-        self._hist = np.zeros((self.history_q, _BINS), dtype=np.float32)
-        self._amp = np.zeros((self.history_q, _BINS))
+        self._hist = np.zeros((self.history_q, BINS), dtype=np.float32)
+        self._amp = np.zeros((self.history_q, BINS))
         self._streak_ns = self.first_seen_ns
         self._kf_x = np.zeros((2, 2))
         self._kf_P = np.eye(2)
@@ -108,10 +109,49 @@ class Track:
         """Predicted floor position (2,) at ``t_ns`` and its 1-sigma per axis, or None if unknown."""
         if self._kf_t is None:
             return None
-        x, P = predict_positions(self._kf_x[None], self._kf_P[None], np.array([(t_ns - self._kf_t) / _NS_PER_S]), accel_std_mps2)
+        x, P = predict_positions(self._kf_x[None], self._kf_P[None], np.array([(t_ns - self._kf_t) / NS_PER_S]), accel_std_mps2)
         return x[0, 0], math.sqrt(P[0, 0, 0])
 
-    def _add_histogram(self, h: NDArray, amp: NDArray) -> None:
+    @property
+    def colours(self) -> NDArray[np.float64]:
+        """The histograms matched so far (up to Q), as amplitudes (``association.amplitudes``), (n, B), in no order."""
+        return self._amp[: min(self._n_hist, self.history_q)]
+
+    @property
+    def colour_rows(self) -> tuple[NDArray[np.float64], int]:
+        """The ring buffer of amplitudes (Q, B) and how many of its rows are in use."""
+        return self._amp, min(self._n_hist, self.history_q)
+
+    def add_colour(self, h: NDArray, amp: NDArray) -> None:
+        """Keep a matched view's histogram (flattened) and its amplitudes, the oldest of Q going."""
         slot = self._n_hist % self.history_q
         self._hist[slot], self._amp[slot] = h.reshape(-1), amp
         self._n_hist += 1
+
+    @property
+    def motion(self) -> tuple[NDArray[np.float64], NDArray[np.float64], int] | None:
+        """The position filter's state: x (2, 2) rows (position, velocity), columns (x, y); P (2, 2); its time (ns)."""
+        return None if self._kf_t is None else (self._kf_x, self._kf_P, self._kf_t)
+
+    def set_motion(self, x: NDArray[np.float64], P: NDArray[np.float64], t_ns: int) -> None:
+        """The position filter's new state (``host.tracking.motion``)."""
+        self._kf_x, self._kf_P, self._kf_t = x, P, int(t_ns)
+
+    @property
+    def streak_start_ns(self) -> int:
+        """When its current run of steady matches began (host.tracking.tracker)."""
+        return self._streak_ns
+
+    def restart_streak(self, t_ns: int) -> None:
+        """A gap in its matches: confirmation and the evidence count again from ``t_ns``."""
+        self._streak_ns, self._chances, self._support = int(t_ns), 1, 1
+
+    def count_chance(self, hit: bool, seen: bool) -> None:
+        """A camera's frame was a chance to see it (``seen``: that camera clearly sees where it stands,
+        or it was matched) and it was matched in it or not (``hit``) (host.tracking.evidence)."""
+        self._chances += int(hit or seen)
+        self._support += int(hit)
+
+    def corroborated(self, min_support: float) -> bool:
+        """Confirmed, or matched in at least ``min_support`` of its chances since its steady matches began."""
+        return self.state == "confirmed" or self._support >= min_support * self._chances

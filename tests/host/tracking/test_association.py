@@ -6,7 +6,7 @@ import numpy as np
 
 from superbody.edge.sim import skeleton
 from superbody.edge.site import load_site
-from superbody.host.tracking.association import duplicate_views
+from superbody.host.tracking.measure import duplicate_views
 from tests.conftest import WTF_SITE
 
 

@@ -58,7 +58,7 @@ def test_two_tracks_one_camera_frame_matched_both_are_two_people_however_close()
 
 def _placed(tid: int, xy: tuple[float, float], confirmed_ns: int) -> Track:
     tr = Track(tid, str(tid), "confirmed", 0, confirmed_ns, 4, confirmed_ns=confirmed_ns)
-    tr._kf_t, tr._kf_x = confirmed_ns, np.array([xy, [0.0, 0.0]])
+    tr.set_motion(np.array([xy, [0.0, 0.0]]), np.eye(2), confirmed_ns)
     return tr
 
 
@@ -68,8 +68,8 @@ def test_the_younger_of_two_coincident_tracks_goes_after_a_while_and_only_then()
     assert coincident(people, 10 * S, 0.3) == []  # close from now on
     assert coincident(people, 10 * S + int(MERGE_AFTER_S * S) - 1, 0.3) == []
     assert coincident(people, 10 * S + int(MERGE_AFTER_S * S), 0.3) == [young]
-    young._kf_x[0] = (0.5, 0.0)  # walked apart: the clock restarts
-    assert coincident(people, 20 * S, 0.3) == [] and young._close_since_ns is None
+    young.set_motion(np.array([(0.5, 0.0), (0.0, 0.0)]), np.eye(2), 20 * S)  # walked apart: the clock restarts
+    assert coincident(people, 20 * S, 0.3) == [] and young.close_since_ns is None
 
 
 # --- through the tracker ------------------------------------------------------------------------
@@ -104,7 +104,7 @@ def test_a_person_all_cameras_see_is_confirmed_as_before():
     for k, (cam, t) in enumerate(schedule(3.0)):
         tr.update(frame(cam, t, {"a": (0.3, -0.2, 0.0, 20.0)}, seed=k)[0])
     assert [p.state for p in tr.tracks] == ["confirmed"]
-    assert tr.tracks[0]._support == tr.tracks[0]._chances or tr.tracks[0]._support / tr.tracks[0]._chances > 0.9
+    assert tr.tracks[0].corroborated(0.9)
 
 
 def _with_legs_twice(obs: Observation) -> Observation:
@@ -348,21 +348,23 @@ def test_a_candidate_its_cameras_corroborate_picks_its_persons_views_before_a_va
     for cam, t in schedule(1.0):  # a person at the origin, seen by every camera: not confirmed yet
         tracker.update(obs(cam, t, 0.0, 0.0))
     (person,) = tracker.tracks
-    assert person.state == "candidate" and person._support >= TrackerConfig().confirm_min_support * person._chances
+    assert person.state == "candidate" and person.corroborated(TrackerConfig().confirm_min_support)
     t = T0 + S
     (born,) = tracker.update(obs(C1, t, 3.0, 3.0))  # the wanderer: a partial view far away ...
     wanderer = tracker.track(born.track_id)
     assert wanderer is not None and wanderer is not person
     # ... whose random walk brought its prediction onto the person, vague, its cameras silent.
-    wanderer._kf_x, wanderer._kf_t = np.array([person._kf_x[0], [0.0, 0.0]]), person._kf_t
-    wanderer._kf_P = np.diag([0.2, 2.0])
-    wanderer._chances, wanderer._support = 30, 3
+    assert person.motion is not None
+    wanderer.set_motion(np.array([person.position, [0.0, 0.0]]), np.diag([0.2, 2.0]), person.motion[2])
+    wanderer.restart_streak(wanderer.streak_start_ns)  # 3 matches in 30 chances
+    for k in range(29):
+        wanderer.count_chance(hit=k < 2, seen=True)
     for k, cam in enumerate((C2, C3, C1)):
         (m,) = tracker.update(obs(cam, t + (k + 1) * 30_000_000, 0.0, 0.0))
         assert m.track_id == person.id
     t += S // 2
-    wanderer._kf_x, wanderer._kf_t, wanderer._kf_P = np.array([person._kf_x[0] + (0.8, 0.0), [0.0, 0.0]]), t, np.diag([0.01, 0.1])
-    (m,) = tracker.update(obs(C2, t, float(person._kf_x[0, 0]) + 0.8, float(person._kf_x[0, 1])))
+    wanderer.set_motion(np.array([person.position + (0.8, 0.0), [0.0, 0.0]]), np.diag([0.01, 0.1]), t)
+    (m,) = tracker.update(obs(C2, t, float(person.position[0]) + 0.8, float(person.position[1])))
     assert m.track_id == wanderer.id
 
 
