@@ -30,7 +30,7 @@ from superbody.edge import transport
 from superbody.edge.messages import wire
 from superbody.edge.messages.observation import PersonView
 from superbody.edge.site import Site
-from superbody.host.estimation.estimator import Estimator, estimate_detailed
+from superbody.host.estimation.estimator import Estimator, detailed
 from superbody.host.filtering.pose_filter import FilterConfig, PoseFilter, predict_many, update_many
 from superbody.host.messages import pose as pose_msg
 from superbody.host.messages.pose_rules import MAX_SPEED
@@ -156,7 +156,9 @@ class Aggregator:
         self._poses: dict[int, tuple[pose_msg.PersonPose, int]] = {}  # track -> (pose, newest stamp)
         self._cam_size = {c.id: (c.width, c.height) for c in site.cameras}
         self._seq = 0
-        self._source = estimator_name.split(":", 1)[0]  # per-person label for estimators that give none
+        # Reached by one call per step: the estimator's own sigmas and sources, or its poses with the
+        # host's estimator name as every person's source.
+        self._estimate = detailed(estimator, estimator_name.split(":", 1)[0]).estimate_detailed
 
     def ingest(self, payload: bytes, key: str | None, now_ns: int) -> bool:
         """Validate one observation payload and feed the tracker.
@@ -241,7 +243,7 @@ class Aggregator:
         todo = [tid for tid in sets if newest[tid] > self._last_input.get(tid, -1)]
         if todo:
             # Every person whose views changed since their last estimate, once, in one batched call.
-            est = estimate_detailed(self.estimator, [sets[tid] for tid in todo], self._source)
+            est = self._estimate([sets[tid] for tid in todo])
             for tid in todo:
                 self._last_input[tid] = newest[tid]
             ok = np.isfinite(est.pose).all(axis=1)  # (B,)

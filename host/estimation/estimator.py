@@ -42,6 +42,8 @@ from superbody.host.estimation.graph import GraphSpec, Variant, build_batch, flo
 __all__ = [
     "Estimator",
     "Estimates",
+    "DetailedEstimator",
+    "detailed",
     "estimate_detailed",
     "OnnxEstimator",
     "ModelMismatchError",
@@ -93,14 +95,34 @@ class Estimates:
     source: tuple[str, ...]
 
 
+@runtime_checkable
+class DetailedEstimator(Protocol):
+    """An estimator that gives each pose its sigma and its source: what the host calls, once per step."""
+
+    def estimate_detailed(self, view_sets: Sequence[Mapping[str, PersonView]]) -> Estimates: ...
+
+
+class _PosesOnly:
+    """A plain ``Estimator`` as a ``DetailedEstimator``: its poses, no sigmas, one source for all."""
+
+    def __init__(self, estimator: Estimator, source: str) -> None:
+        self._estimator, self._source = estimator, source
+
+    def estimate_detailed(self, view_sets: Sequence[Mapping[str, PersonView]]) -> Estimates:
+        pose = np.asarray(self._estimator.estimate(view_sets), dtype=np.float64).reshape(-1, 3)
+        return Estimates(pose, np.full(pose.shape, np.nan), (self._source,) * len(pose))
+
+
+def detailed(estimator: Estimator, source: str) -> DetailedEstimator:
+    """The estimator itself when it gives sigmas and sources (``estimate_detailed``), else it
+    wrapped to give its poses with no sigmas and ``source`` for every person. The host adapts its
+    estimator once, then reaches it by one call."""
+    return estimator if isinstance(estimator, DetailedEstimator) else _PosesOnly(estimator, source)
+
+
 def estimate_detailed(estimator: Estimator, view_sets: Sequence[Mapping[str, PersonView]], source: str) -> Estimates:
-    """``estimator.estimate_detailed`` when it has one; otherwise its poses, no sigmas, and
-    ``source`` for every person."""
-    detailed = getattr(estimator, "estimate_detailed", None)
-    if detailed is not None:
-        return detailed(view_sets)
-    pose = np.asarray(estimator.estimate(view_sets), dtype=np.float64).reshape(-1, 3)
-    return Estimates(pose, np.full(pose.shape, np.nan), (source,) * len(pose))
+    """``detailed(estimator, source).estimate_detailed(view_sets)``."""
+    return detailed(estimator, source).estimate_detailed(view_sets)
 
 
 class ModelMismatchError(ValueError):
