@@ -167,13 +167,15 @@ def residuals(instant: Instant, cameras: Mapping[str, Camera], points: NDArray, 
         pc = (points[i, m] + instant.offsets_m[i] - cam.t) @ cam.R  # (M, 3)
         front = pc[:, 2] > _MIN_DEPTH_M
         to_point = pc @ cam.R.T  # (M, 3) world direction, not normalised
-        cos = np.einsum("mc,mc->m", to_point, dirs[i, m]) / np.linalg.norm(to_point, axis=1)
+        # The angle as atan2(|a x b|, a . b): exact for small angles, where arccos is not.
+        sin = np.linalg.norm(np.cross(to_point, dirs[i, m]), axis=1)
+        cos = np.einsum("mc,mc->m", to_point, dirs[i, m])
         xn = pc[:, :2] / np.where(front, pc[:, 2], 1.0)[:, None]
         if np.any(cam.D):
             xn = distort(xn, cam.D)
         uv = xn * [cam.fx, cam.fy] + [cam.cx, cam.cy]
         idx = np.flatnonzero(m)[front]
-        deg[i, idx] = np.degrees(np.arccos(np.clip(cos[front], -1.0, 1.0)))
+        deg[i, idx] = np.degrees(np.arctan2(sin[front], cos[front]))
         px[i, idx] = np.linalg.norm(uv[front] - instant.keypoints[i, idx, :2], axis=1)
     return deg, px
 
