@@ -261,11 +261,11 @@ class CalibrationHealth:
     def report(self, now_ns: int) -> dict[str, CameraHealth]:
         """Every camera's health over the window ending at ``now_ns`` (module docstring)."""
         self._forget(now_ns)
-        stats = {}
+        stats: dict[str, tuple[float, float, int, int]] = {}  # camera -> (median px, median deg, joints, views)
         for c, q in self._res.items():
-            deg = np.concatenate([d for _, d, _ in q]) if q else np.zeros(0)
-            px = np.concatenate([p for _, _, p in q]) if q else np.zeros(0)
-            stats[c] = (float(np.median(px)) if len(px) else math.nan, float(np.median(deg)) if len(deg) else math.nan, len(deg), len(q))
+            degs = np.concatenate([d for _, d, _ in q]) if q else np.zeros(0)
+            pxs = np.concatenate([p for _, _, p in q]) if q else np.zeros(0)
+            stats[c] = (float(np.median(pxs)) if len(pxs) else math.nan, float(np.median(degs)) if len(degs) else math.nan, len(degs), len(q))
         known = [c for c, s in stats.items() if s[2] >= MIN_SAMPLES]
         suspect = [c for c in known if stats[c][1] > SUSPECT_DEG]
         enough = sum(len(ins.cameras) >= 3 for ins in self._instants) >= MIN_CHECK_INSTANTS
@@ -291,5 +291,7 @@ class CalibrationHealth:
         pool = list(self._instants)
         many = [ins for ins in pool if len(ins.cameras) >= 3]
         pool = many if len(many) >= _CHECK_INSTANTS // 2 else pool
-        idx = np.unique(np.linspace(0, len(pool) - 1, min(len(pool), _CHECK_INSTANTS)).round().astype(int)) if pool else []
+        if not pool:
+            return []
+        idx = np.unique(np.linspace(0, len(pool) - 1, min(len(pool), _CHECK_INSTANTS)).round().astype(int))
         return [pool[i] for i in idx]

@@ -113,6 +113,8 @@ def calibrate_from_people(frames: Sequence[Frame], site: Site, fix: Sequence[str
         unknown = [c for c in fix if c not in ids]
         if unknown:
             raise ValueError(f"--fix: camera(s) {', '.join(unknown)} not in site {site.name!r}; cameras: {', '.join(ids)}")
+        if len(set(fix)) < MIN_FIXED:
+            raise ValueError(f"--fix: at least {MIN_FIXED} cameras must be held (they carry the world frame, floor and scale); got {len(set(fix))}")
     instants, counts = person_instants(frames, site, max_skew_s=max_skew_s,
                                        progress=None if progress is None else lambda n: progress("track", n, len(frames)))
     monitor = CalibrationHealth(site, window_s=3600.0, check_every_s=0.0)
