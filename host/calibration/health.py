@@ -228,7 +228,9 @@ class CalibrationHealth:
         if not new:
             return 0
         self._keep(instant)
-        deg, px = instant_residuals(instant, self.cameras)  # (V, 17) each
+        rows = np.zeros(len(instant.cameras), dtype=bool)
+        rows[new] = True
+        deg, px = instant_residuals(instant, self.cameras, rows)  # (V, 17) each, NaN but for the new views
         added = 0
         for i in new:
             c = instant.cameras[i]

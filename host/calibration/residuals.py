@@ -100,44 +100,55 @@ def rays(instant: Instant, cameras: Mapping[str, Camera]) -> tuple[NDArray[np.fl
     """
     kp = instant.keypoints
     seen = ~np.isnan(kp[:, :, 0])  # (V, 17)
-    dirs = np.zeros(kp.shape[:2] + (3,))
-    for i, cid in enumerate(instant.cameras):
-        cam = cameras[cid]
-        if seen[i].any():
-            dirs[i, seen[i]] = normalised_to_rays(undistort(kp[i, seen[i], :2], cam), cam.R)
-    origins = np.stack([cameras[c].t for c in instant.cameras]) - instant.offsets_m if instant.cameras else np.zeros((0, 3))
+    if not instant.cameras:
+        return np.zeros((0, 3)), np.zeros((0, NUM_KEYPOINTS, 3)), seen
+    cams = [cameras[c] for c in instant.cameras]
+    f = np.array([[c.fx, c.fy] for c in cams])  # (V, 2)
+    cxy = np.array([[c.cx, c.cy] for c in cams])  # (V, 2)
+    xn = (np.where(seen[..., None], kp[..., :2], 0.0) - cxy[:, None, :]) / f[:, None, :]  # (V, 17, 2) pinhole
+    for i, cam in enumerate(cams):
+        if np.any(cam.D) and seen[i].any():
+            xn[i, seen[i]] = undistort(kp[i, seen[i], :2], cam)
+    dirs = normalised_to_rays(xn, np.stack([c.R for c in cams])) * seen[..., None]  # (V, 17, 3)
+    origins = np.stack([c.t for c in cams]) - instant.offsets_m
     return origins, dirs, seen
 
 
-def leave_one_out(origins: NDArray, dirs: NDArray, seen: NDArray) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+def leave_one_out(origins: NDArray, dirs: NDArray, seen: NDArray, rows: NDArray | None = None) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """Each view's joints triangulated from the other views alone.
 
     Args:
         origins: (V, 3) ray origins.
         dirs: (V, 17, 3) unit ray directions.
         seen: (V, 17) which rays exist.
+        rows: (V,) bool, the views to triangulate for (default all; the others get none).
 
     Returns:
         ``(points, ok)``: (V, 17, 3) the point of joint j from every view but v, and (V, 17)
         where it exists (v saw j; at least ``MIN_OTHER_VIEWS`` others did, their rays meet at
         ``MIN_RAY_ANGLE_DEG`` or more, and the point is in front of them). NaN where not ok.
     """
+    V = len(origins)
+    sel = np.arange(V) if rows is None else np.flatnonzero(rows)  # (S,)
     # sum_k (I - d_k d_k^T) p = sum_k (I - d_k d_k^T) o_k over the other views k
     proj = (np.eye(3) - dirs[..., :, None] * dirs[..., None, :]) * seen[..., None, None]  # (V, 17, 3, 3)
-    rhs = proj @ origins[:, None, :, None]  # (V, 17, 3, 1)
-    A = proj.sum(0)[None] - proj  # (V, 17, 3, 3) all views but v
-    b = (rhs.sum(0)[None] - rhs)[..., 0]  # (V, 17, 3)
-    others = seen.sum(0)[None] - seen  # (V, 17)
-    ok = seen & (others >= MIN_OTHER_VIEWS)
+    rhs = (proj @ origins[:, None, :, None])[..., 0]  # (V, 17, 3)
+    A = proj.sum(0)[None] - proj[sel]  # (S, 17, 3, 3) all views but v
+    b = rhs.sum(0)[None] - rhs[sel]  # (S, 17, 3)
+    others = seen.sum(0)[None] - seen[sel]  # (S, 17)
+    ok = seen[sel] & (others >= MIN_OTHER_VIEWS)
     A = np.where(ok[..., None, None], A, np.eye(3))
     ok &= np.linalg.eigvalsh(A)[..., 0] >= _MIN_EIG
-    points = np.linalg.solve(np.where(ok[..., None, None], A, np.eye(3)), np.where(ok[..., None], b, 0.0)[..., None])[..., 0]
+    pts = np.linalg.solve(np.where(ok[..., None, None], A, np.eye(3)), np.where(ok[..., None], b, 0.0)[..., None])[..., 0]
     # In front of every other view that saw the joint (a point behind a camera is no meeting).
-    depth = np.einsum("kjc,vjkc->vjk", dirs, points[:, :, None, :] - origins[None, None, :, :])  # (V, 17, K) along view k's ray
-    other = seen.T[None, :, :] & ~np.eye(len(origins), dtype=bool)[:, None, :]  # (V, 17, K): k is another view that saw j
+    depth = np.einsum("kjc,sjkc->sjk", dirs, pts[:, :, None, :] - origins[None, None, :, :])  # (S, 17, K) along view k's ray
+    other = seen.T[None, :, :] & (sel[:, None] != np.arange(V)[None, :])[:, None, :]  # (S, 17, K): k is another view that saw j
     ok &= ~(other & (depth < _MIN_DEPTH_M)).any(axis=2)
-    points[~ok] = np.nan
-    return points, ok
+    points = np.full((V, NUM_KEYPOINTS, 3), np.nan)
+    ok_all = np.zeros((V, NUM_KEYPOINTS), dtype=bool)
+    points[sel] = np.where(ok[..., None], pts, np.nan)
+    ok_all[sel] = ok
+    return points, ok_all
 
 
 def residuals(instant: Instant, cameras: Mapping[str, Camera], points: NDArray, ok: NDArray,
@@ -158,33 +169,36 @@ def residuals(instant: Instant, cameras: Mapping[str, Camera], points: NDArray, 
         dirs = rays(instant, cameras)[1]
     deg = np.full(ok.shape, np.nan)
     px = np.full(ok.shape, np.nan)
-    for i, cid in enumerate(instant.cameras):
-        m = ok[i]
-        if not m.any():
-            continue
-        cam = cameras[cid]
-        # The joint where it was when this view was captured, in the camera's frame.
-        pc = (points[i, m] + instant.offsets_m[i] - cam.t) @ cam.R  # (M, 3)
-        front = pc[:, 2] > _MIN_DEPTH_M
-        to_point = pc @ cam.R.T  # (M, 3) world direction, not normalised
-        # The angle as atan2(|a x b|, a . b): exact for small angles, where arccos is not.
-        sin = np.linalg.norm(np.cross(to_point, dirs[i, m]), axis=1)
-        cos = np.einsum("mc,mc->m", to_point, dirs[i, m])
-        xn = pc[:, :2] / np.where(front, pc[:, 2], 1.0)[:, None]
-        if np.any(cam.D):
-            xn = distort(xn, cam.D)
-        uv = xn * [cam.fx, cam.fy] + [cam.cx, cam.cy]
-        idx = np.flatnonzero(m)[front]
-        deg[i, idx] = np.degrees(np.arctan2(sin[front], cos[front]))
-        px[i, idx] = np.linalg.norm(uv[front] - instant.keypoints[i, idx, :2], axis=1)
+    if not ok.any():
+        return deg, px
+    cams = [cameras[c] for c in instant.cameras]
+    R = np.stack([c.R for c in cams])  # (V, 3, 3)
+    t = np.stack([c.t for c in cams])  # (V, 3)
+    # The joint where it was when each view was captured, in that camera's frame: R^T (X + offset - t).
+    rel = np.where(ok[..., None], points, 0.0) + (instant.offsets_m - t)[:, None, :]  # (V, 17, 3) world
+    pc = np.einsum("vji,vkj->vki", R, rel)  # (V, 17, 3)
+    ok = ok & (pc[..., 2] > _MIN_DEPTH_M)
+    # The angle between the rays as atan2(|a x b|, a . b): exact for small angles, where arccos is not.
+    a, b = rel, dirs
+    cross = np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1], a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                      a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)  # (V, 17, 3)
+    angle = np.degrees(np.arctan2(np.sqrt((cross**2).sum(-1)), (a * b).sum(-1)))  # (V, 17)
+    xn = pc[..., :2] / np.where(ok, pc[..., 2], 1.0)[..., None]  # (V, 17, 2)
+    for i, cam in enumerate(cams):
+        if np.any(cam.D) and ok[i].any():
+            xn[i, ok[i]] = distort(xn[i, ok[i]], cam.D)
+    uv = xn * np.array([[c.fx, c.fy] for c in cams])[:, None, :] + np.array([[c.cx, c.cy] for c in cams])[:, None, :]
+    err = np.sqrt(((uv - instant.keypoints[..., :2]) ** 2).sum(-1))  # (V, 17)
+    deg[ok], px[ok] = angle[ok], err[ok]
     return deg, px
 
 
-def instant_residuals(instant: Instant, cameras: Mapping[str, Camera]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Leave-one-out residuals of every view of an instant: ``(degrees, pixels)``, (V, 17) each, NaN where unmeasured."""
-    if len(instant.cameras) <= MIN_OTHER_VIEWS:
+def instant_residuals(instant: Instant, cameras: Mapping[str, Camera], rows: NDArray | None = None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Leave-one-out residuals of the views of an instant (``rows``, (V,) bool: only those; default
+    all): ``(degrees, pixels)``, (V, 17) each, NaN where unmeasured."""
+    if len(instant.cameras) <= MIN_OTHER_VIEWS or (rows is not None and not np.any(rows)):
         nan = np.full((len(instant.cameras), NUM_KEYPOINTS), np.nan)
         return nan, nan.copy()
     origins, dirs, seen = rays(instant, cameras)
-    points, ok = leave_one_out(origins, dirs, seen)
+    points, ok = leave_one_out(origins, dirs, seen, rows)
     return residuals(instant, cameras, points, ok, dirs)
