@@ -40,7 +40,7 @@ def _monitor(host, frames) -> tuple[dict[str, float], dict]:
     """The recording through the tracker and the monitor, reported each second: when each
     camera was first flagged (capture seconds from the recording's start), and the last report."""
     instants, _ = person_instants(frames, host)
-    mon = CalibrationHealth(host, check_every_s=2.0)
+    mon = CalibrationHealth(host, check_every_s=5.0)
     flagged: dict[str, float] = {}
     nxt = instants[0].stamp_ns
     for ins in instants:
