@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Final, cast
 
@@ -311,7 +311,3 @@ def _orthonormal(R: NDArray) -> NDArray[np.float64]:
     """The rotation nearest ``R`` (SVD), so the site file's check of it passes after rounding."""
     u, _, vt = np.linalg.svd(R)
     return u @ vt
-
-
-def cameras_by_id(cameras: Sequence[Camera]) -> Mapping[str, Camera]:
-    return {c.id: c for c in cameras}

@@ -18,7 +18,7 @@ them first.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Final
@@ -184,8 +184,3 @@ def person_instants(frames: Sequence[Frame], site: Site, *, max_skew_s: float = 
     out.sort(key=lambda ins: ins.stamp_ns)
     counts = {"frames": len(frames), "accepted": agg.accepted, "people": len(groups), "views": views}
     return out, counts
-
-
-def frames_from(observations: Iterable[tuple[int, str, bytes]]) -> list[Frame]:
-    """(stamp ns, camera id, payload) triples as ``Frame``s, in capture order."""
-    return sorted((Frame(int(t), c, bytes(p)) for t, c, p in observations), key=lambda fr: fr.stamp_ns)

@@ -6,8 +6,8 @@ residual is 0.8-1.4 deg on the shipped calibration (the detector places a joint 
 differently from each side), and a bundle adjustment that frees one camera of the shipped site
 moves it 1.9-2.6 deg and 14-18 cm (0.6-0.85 deg of image over the walked area): that is where
 these joints put it. So a camera knocked 2 deg and 10 cm is found when its view moved (3.4-3.9 deg
-of image) and the recording tells which camera moved (cameras 1 and 3 three knocks in four,
-camera 2 one in four), never another camera; the refinement brings its image back to within
+of image) and the recording tells which camera moved (cameras 1 and 3 in each of four knocks,
+camera 2 in one), never another camera; the refinement brings its image back to within
 0.9 deg, but not its pose to the issue's 0.3 deg and 2 cm (the strict xfail below).
 """
 
