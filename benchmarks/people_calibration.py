@@ -4,6 +4,7 @@ site knocked by a given rotation and shift in the site file, the health monitor 
 
     python -m benchmarks.people_calibration [--dev PATH] [--sites wtf-apartment,lab-example,room5]
                                             [--seconds 20] [--people 3] [--seeds 6] [--json-out F]
+    python -m benchmarks.people_calibration --cost
 
 Recordings: the real WheresTheFellow dev split (3 cameras, one person, 27 s), and simulated
 ones of the shipped sites and of the five-camera room of ``benchmarks/scenes.py`` (scene k),
@@ -43,7 +44,7 @@ from superbody.host.calibration.collect import Frame, person_instants
 from superbody.host.calibration.health import CalibrationHealth, image_shift_deg
 from superbody.host.calibration.refine import camera_residuals, subsample
 
-__all__ = ["knock", "dev_frames", "sim_frames", "sim_site", "run_case", "main"]
+__all__ = ["knock", "dev_frames", "sim_frames", "sim_site", "run_case", "measure_cost", "main"]
 
 DEGREES: Final = 2.0
 METRES: Final = 0.10
@@ -171,6 +172,48 @@ def _line(label: str, r: dict) -> str:
     return s
 
 
+def measure_cost(seconds: float = 10.0, people: int = 3) -> dict[str, float]:
+    """The monitor's cost on the sites' simulated people: ``observe`` per call for room5's
+    five-camera sets (one view new, as at a host step; all five new), ``report`` without its
+    test over the window, and the test for three, four and five cameras."""
+    from superbody.edge.messages.observation import PersonView, empty_histogram
+
+    out: dict[str, float] = {}
+    for name in ("wtf-apartment", "lab-example", "room5"):
+        site = sim_site(name)
+        instants, _ = person_instants(sim_frames(site, people, seconds, seed=1), site)
+        mon = CalibrationHealth(site, check_every_s=0.0)
+        for ins in instants:
+            mon.observe_instant(ins)
+        sample = mon._sample()
+        t = time.perf_counter()
+        from superbody.host.calibration.health import attribute
+
+        attribute(site.cameras, sample)
+        out[f"test_s_{len(site.cameras)}_cameras"] = time.perf_counter() - t
+        if name != "room5":
+            continue
+        mon.check_ns = 10**18  # no test: the medians alone
+        t = time.perf_counter()
+        for _ in range(20):
+            mon.report(instants[-1].stamp_ns)
+        out["report_ms_without_test"] = (time.perf_counter() - t) / 20 * 1e3
+        sets = [ins for ins in instants if len(ins.cameras) == 5][:50]
+        views = [{c: PersonView(keypoints=ins.keypoints[i].astype(np.float32), bbox=np.zeros(4, np.float32), histogram=empty_histogram())
+                  for i, c in enumerate(ins.cameras)} for ins in sets]
+        for label, one in (("observe_ms_one_new", True), ("observe_ms_all_new", False)):
+            m = CalibrationHealth(site)
+            t, n = time.perf_counter(), 0
+            for r in range(20):
+                for k, v in enumerate(views):
+                    now = sets[0].stamp_ns + (r * 100 + k) * 10_000_000
+                    stamps = {c: (now if (j == r % 5 or not one) else sets[0].stamp_ns) for j, c in enumerate(v)}
+                    m.observe(v, now, stamps=stamps, velocity=(0.5, 0.2), person=k)
+                    n += 1
+            out[label] = (time.perf_counter() - t) / max(n, 1) * 1e3
+    return out
+
+
 def main(dev: str | None, sites: Sequence[str], seconds: float, people: int, seeds: int, json_out: str | None) -> int:
     results: dict[str, dict] = {}
     print(f"each case: one camera knocked {DEGREES:g} deg and {100 * METRES:g} cm in the host's site file, the view moved (view: turn and "
@@ -213,5 +256,10 @@ if __name__ == "__main__":
     p.add_argument("--people", type=int, default=3, help="simulated people (default 3)")
     p.add_argument("--seeds", type=int, default=6, help="random knocks per dev.json camera (default 6)")
     p.add_argument("--json-out")
+    p.add_argument("--cost", action="store_true", help="only the monitor's cost per call (observe, report, its test)")
     a = p.parse_args()
+    if a.cost:
+        for k, v in measure_cost().items():
+            print(f"{k}: {v:.3f}")
+        sys.exit(0)
     sys.exit(main(a.dev, [s for s in a.sites.split(",") if s], a.seconds, a.people, a.seeds, a.json_out))
