@@ -182,7 +182,7 @@ class CalibrationHealth:
         site: the site whose calibration is watched.
         window_s: the window, seconds of capture time.
         check_every_s: the one-camera test runs at most this often (it costs a bundle
-            adjustment per camera and one more, over up to 60 instants: 0.3 s for 3 cameras, 0.9 s for 5).
+            adjustment per camera and one more, over up to 60 instants: 0.1-0.3 s for 3 cameras, 0.5 s for 5).
         reservoir_every_s: at most one instant per person this often is kept for the test.
         max_views: each camera keeps at most this many views' residuals (memory bound).
     """
