@@ -91,6 +91,9 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
     from superbody.edge.calibration import cli as calibration_cli  # board, intrinsics, oak-intrinsics; OpenCV loads on run
 
     calibration_cli.register(csub)
+    from superbody.host.calibration import cli as people_cli  # calibrate people: the tracker and scipy load on run
+
+    people_cli.register(csub)
 
 
 _FPS_NOTE = """\
