@@ -30,6 +30,7 @@ from superbody.edge import transport
 from superbody.edge.messages import wire
 from superbody.edge.messages.observation import PersonView
 from superbody.edge.site import Site
+from superbody.host.calibration.health import CalibrationHealth
 from superbody.host.estimation.estimator import Estimator, detailed
 from superbody.host.filtering.pose_filter import FilterConfig, PoseFilter, predict_many, update_many
 from superbody.host.messages import pose as pose_msg
@@ -65,6 +66,10 @@ class HostConfig:
             the excess ("over_rate", ``host.timeline.RateLimit``) before decoding it.
         max_frames_per_step: frames fed to the tracker per step at most; the rest wait for the
             next step (bounded work per tick, however much arrived).
+        watch_calibration_s: each person's set S goes to the calibration monitor
+            (``host.calibration.health``: whether each camera still sits where the site file says)
+            at most this often, seconds of capture time (0: the monitor is off). 0.2: 0.5 ms a
+            call, so 10 people cost 25 ms a second.
         max_future_s: observations stamped further ahead of the host's clock are rejected
             (nodes are NTP-synced to milliseconds; a looser limit lets a peer's stamps run ahead).
         queue_size: observations waiting to be processed; beyond it the oldest are dropped.
@@ -82,6 +87,7 @@ class HostConfig:
     restart_gap_s: float = 1.0
     max_rate_factor: float = 2.0
     max_frames_per_step: int = 256
+    watch_calibration_s: float = 0.2
     max_future_s: float = 0.25
     queue_size: int = 4096
     queue_bytes: int = 16 * 1024 * 1024
@@ -93,7 +99,7 @@ class HostConfig:
 
     def __post_init__(self) -> None:
         for name, lo, hi in (("freshness_s", 0.01, 60.0), ("max_delay_s", 0.0, 60.0), ("restart_gap_s", 0.0, 600.0),
-                             ("max_rate_factor", 1.0, 1000.0), ("max_future_s", 0.0, 3600.0), ("min_publish_hz", 0.1, 1000.0),
+                             ("max_rate_factor", 1.0, 1000.0), ("watch_calibration_s", 0.0, 60.0), ("max_future_s", 0.0, 3600.0), ("min_publish_hz", 0.1, 1000.0),
                              ("max_publish_hz", 0.0, 1000.0), ("status_every_s", 0.1, 3600.0)):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and lo <= v <= hi):
@@ -147,6 +153,8 @@ class Aggregator:
         self.tracker = Tracker(site, config.tracker)
         self.timeline = Timeline(site, config.max_delay_s, config.tracker.remove_after_s, config.restart_gap_s, start_ns)
         self.as_of_ns: int | None = None  # the instant the last step fused every camera up to
+        self.calibration = CalibrationHealth(site)
+        self._watched: dict[int, int] = {}  # track -> stamp of the set S last given to the calibration monitor
         self.rejected: Counter[str] = Counter()
         self.accepted = 0
         self.cameras_alive: set[str] = set()
@@ -230,6 +238,7 @@ class Aggregator:
         assert t is not None  # the watermark has been moved
         self.as_of_ns = t
         for tr in self.tracker.prune(t):
+            self._watched.pop(tr.id, None)
             self._filters.pop(tr.id, None)
             self._last_input.pop(tr.id, None)
             self._poses.pop(tr.id, None)
@@ -265,6 +274,7 @@ class Aggregator:
             update_many(filters, measured, est.pose[rows], est.std[rows])
             fps = predict_many(filters, stamps)
             self.tracker.set_positions(tids, [(fp.x, fp.y) for fp in fps], stamps)
+            self._watch_calibration(tids, sets, stamps_of, newest, fps)
             conf = confidences([sets[tid] for tid in tids]).tolist() if tids else []
             for i, tid, fp, c in zip(rows, tids, fps, conf):
                 views = sets[tid]
@@ -282,6 +292,19 @@ class Aggregator:
             site=self.site.name, seq=self._seq, stamp_ns=now_ns, people=people, latency_ns=max(0, int(now_ns) - t),
             cameras_alive=tuple(sorted(self.cameras_alive)), estimator=self.estimator_name,
         )
+
+
+    def _watch_calibration(self, tids: list[int], sets: dict[int, dict[str, PersonView]], stamps_of: dict[int, list[int]],
+                           newest: dict[int, int], poses: list) -> None:
+        """Each person's set S of two views or more to the calibration monitor, at most every ``watch_calibration_s``."""
+        every = round(self.config.watch_calibration_s * _NS)
+        if every <= 0:
+            return
+        for tid, fp in zip(tids, poses):
+            views = sets[tid]
+            if len(views) >= 2 and newest[tid] - self._watched.get(tid, -every) >= every:
+                self._watched[tid] = newest[tid]
+                self.calibration.observe(views, newest[tid], stamps=dict(zip(views, stamps_of[tid])), velocity=(fp.vx, fp.vy), person=tid)
 
 
 _DROP_DETAIL = {

@@ -13,7 +13,9 @@ work is bounded and the host publishes at its rate. A PoseArray computed before 
 process (a frozen host, a swapped-out machine) is never published after it. The status goes out
 on its own schedule, every ``status_every_s``, as one log line and as JSON on
 ``superbody/<site>/host/status`` (``host.messages.status.HostStatus``, docs/status-schema.md):
-counters, capture-to-publish latency, the overall health and every camera's timing.
+counters, capture-to-publish latency, the overall health, every camera's timing and its
+calibration health (``host.calibration.health``; the monitor's one-camera test, bundle
+adjustments of up to a second, runs in a thread of its own, never in the loop).
 
 ``superbody host run --site SITE.toml [--model M.onnx | --estimator analytic]``.
 """
@@ -26,6 +28,7 @@ import threading
 import time
 from collections import Counter, deque
 from collections.abc import Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 
@@ -33,6 +36,7 @@ from superbody.edge import transport
 from superbody.edge.clock import WorldClock
 from superbody.edge.messages import wire
 from superbody.host.aggregator import Aggregator
+from superbody.host.calibration.health import attribute
 from superbody.host.health import CameraWatch, camera_statuses, health_of
 from superbody.host.memory import release_free_memory
 from superbody.host.messages import pose as pose_msg
@@ -189,6 +193,10 @@ def run_host(
     max_period = 1.0 / cfg.max_publish_hz if cfg.max_publish_hz > 0 else 0.0
     stall_ns = int(STALL_S * 1e9 * clock.scale)
     watch = CameraWatch()
+    # The calibration monitor's one-camera test (bundle adjustments: up to a second) runs in a
+    # thread of its own, never in the loop; its result is applied in the loop when it is done.
+    checker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="calibration")
+    check: Future | None = None
     with zenoh.open(conf) as session:
         token = session.liveliness().declare_token(transport.host_alive_key(site.name))
         outputs: list[Sink] = [ZenohSink(session, site.name), *sinks]
@@ -223,8 +231,15 @@ def run_host(
                     counters["published"] += 1
                     people = len(arr.people)
                 last_pub = time.monotonic()
+            if check is not None and check.done():
+                aggregator.calibration.apply(check.result())
+                check = None
             if time.monotonic() - last_status >= cfg.status_every_s:  # its own schedule, published or not
-                status = _status(aggregator, clock.now_ns(), watch, recent, obs_since_status / (time.monotonic() - last_status), people,
+                now = clock.now_ns()
+                due = aggregator.calibration.check_due(now) if check is None and cfg.watch_calibration_s > 0 else None
+                if due is not None:
+                    check = checker.submit(attribute, *due)
+                status = _status(aggregator, now, watch, recent, obs_since_status / (time.monotonic() - last_status), people,
                                  latencies, intake.queue_dropped, counters["published"])
                 status_pub.put(host_status.encode(status))
                 last_status, obs_since_status = time.monotonic(), 0
@@ -235,6 +250,7 @@ def run_host(
         live.undeclare()
         outputs[0].close()
         token.undeclare()
+    checker.shutdown(wait=False, cancel_futures=True)
     counters["queue_dropped"] = intake.queue_dropped
     p50, p99 = _percentiles(latencies)
     return {"published": counters["published"], "accepted": aggregator.accepted, "rejected": dict(aggregator.rejected),
@@ -260,7 +276,8 @@ def _status(aggregator: Aggregator, now_ns: int, watch: CameraWatch, recent: Cou
             latencies: deque, queue_dropped: int, published: int) -> host_status.HostStatus:
     """The status now, and its log line; a camera whose problems start or end is logged too."""
     site = aggregator.site
-    cameras = camera_statuses(aggregator.timeline, aggregator.cameras_alive, aggregator.cameras_gone, now_ns)
+    calibration = aggregator.calibration.report(now_ns, check=False) if aggregator.config.watch_calibration_s > 0 else None
+    cameras = camera_statuses(aggregator.timeline, aggregator.cameras_alive, aggregator.cameras_gone, now_ns, calibration)
     watch.update(cameras)
     reasons = {"queue_full": "host: {n} frames dropped unread, their camera's queue was full: the host is slower than its cameras",
                "stalled": "host: {n} pose arrays dropped, computed before the host stalled"}

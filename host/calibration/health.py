@@ -274,8 +274,34 @@ class CalibrationHealth:
         self._measured = {k: t for k, t in self._measured.items() if t >= old}
         self._kept = {k: t for k, t in self._kept.items() if t >= old}
 
-    def report(self, now_ns: int) -> dict[str, CameraHealth]:
-        """Every camera's health over the window ending at ``now_ns`` (module docstring)."""
+    def check_due(self, now_ns: int) -> tuple[list[Camera], list[Instant], list[str]] | None:
+        """The one-camera test's inputs if it is due at ``now_ns`` (enough instants of three or more
+        views, ``check_every_s`` since the last), else None; for a caller that runs ``attribute``
+        elsewhere (the host process: in a thread of its own) and hands the result to ``apply``."""
+        self._forget(now_ns)
+        if sum(len(ins.cameras) >= 3 for ins in self._instants) < MIN_CHECK_INSTANTS:
+            self._attribution = None
+            return None
+        if self._last_check is not None and now_ns - self._last_check < self.check_ns:
+            return None
+        self._last_check = now_ns
+        known = [c for c, q in self._res.items() if sum(len(d) for _, d, _ in q) >= MIN_SAMPLES]
+        return list(self.site.cameras), self._sample(), known
+
+    def apply(self, attribution: Attribution | None) -> None:
+        """The result of a test ``check_due`` handed out, for the reports from now on."""
+        self._attribution = attribution
+
+    def report(self, now_ns: int, check: bool = True) -> dict[str, CameraHealth]:
+        """Every camera's health over the window ending at ``now_ns`` (module docstring).
+
+        ``check``: run the one-camera test here when it is due (a bundle adjustment per camera,
+        up to a second); False: use the last result handed to ``apply``.
+        """
+        if check:
+            due = self.check_due(now_ns)
+            if due is not None:
+                self._attribution = attribute(*due)
         self._forget(now_ns)
         stats: dict[str, tuple[float, float, int, int]] = {}  # camera -> (median px, median deg, joints, views)
         for c, q in self._res.items():
@@ -284,12 +310,6 @@ class CalibrationHealth:
             stats[c] = (float(np.median(pxs)) if len(pxs) else math.nan, float(np.median(degs)) if len(degs) else math.nan, len(degs), len(q))
         known = [c for c, s in stats.items() if s[2] >= MIN_SAMPLES]
         suspect = [c for c in known if stats[c][1] > SUSPECT_DEG]
-        enough = sum(len(ins.cameras) >= 3 for ins in self._instants) >= MIN_CHECK_INSTANTS
-        if not enough:
-            self._attribution = None
-        elif self._last_check is None or now_ns - self._last_check >= self.check_ns:
-            self._last_check = now_ns
-            self._attribution = attribute(list(self.site.cameras), self._sample(), known)
         a = self._attribution
         out = {}
         for c, (px, deg, n, views) in stats.items():

@@ -31,7 +31,7 @@ if TYPE_CHECKING:
     import zenoh
 
 __all__ = ["SCHEMA", "VERSION", "ENCODING", "MAX_PAYLOAD_BYTES", "MAX_CAMERAS", "HEALTH_STATES", "CAMERA_STATES", "Latency", "Delay",
-           "Health", "CameraStatus", "HostStatus", "latency", "delay", "encode", "decode", "zenoh_encoding"]
+           "Health", "Calibration", "CameraStatus", "HostStatus", "latency", "delay", "encode", "decode", "zenoh_encoding"]
 
 SCHEMA: Final[str] = "superbody.host_status"
 VERSION: Final[int] = 1
@@ -49,7 +49,7 @@ _Milliseconds = Annotated[float, Meta(ge=0.0)]
 HEALTH_STATES: Final[tuple[str, ...]] = ("ok", "degraded")
 # A camera's state: its first problem's word (host.timeline.Timeline.problems), or "gone" (its
 # liveliness token dropped), or "ok".
-CAMERA_STATES: Final[tuple[str, ...]] = ("ok", "gone", "silent", "too_late", "slow", "over_rate", "two_publishers", "moved")
+CAMERA_STATES: Final[tuple[str, ...]] = ("ok", "gone", "silent", "too_late", "slow", "over_rate", "two_publishers", "moved", "suspect")
 MAX_REASONS: Final[int] = 256
 _Reason = Annotated[str, Meta(max_length=512)]
 
@@ -78,6 +78,16 @@ class Health(Struct, kw_only=True):
                                                                                "'camera <id>: <state>: ...' for a camera's")]
 
 
+class Calibration(Struct, kw_only=True):
+    """How well a camera's views of people agree with the other cameras' (host.calibration.health)."""
+
+    state: Annotated[str, Meta(pattern="^(unknown|ok|suspect|moved)$",
+                               description="unknown (too few people seen with others), ok, suspect (off, but not found to have moved), moved")]
+    residual_deg: Annotated[float, Meta(ge=0.0)] | None = None
+    residual_px: Annotated[float, Meta(ge=0.0)] | None = None
+    samples: Annotated[int, Meta(ge=0, description="joint residuals in the window (30 s)")]
+
+
 class CameraStatus(Struct, kw_only=True):
     """One camera of the site, as the host sees it."""
 
@@ -91,6 +101,7 @@ class CameraStatus(Struct, kw_only=True):
     dropped: Annotated[dict[str, _NonNegative], Meta(description="frames dropped, by reason: too_late, late, duplicate, "
                                                                  "seq_backwards, stale, over_rate, queue_full")]
     problems: Annotated[list[_Reason], Meta(max_length=16, description="what is wrong with it, one sentence each")]
+    calibration: Calibration | None = None
 
 
 class HostStatus(Struct, kw_only=True):
@@ -157,6 +168,10 @@ def _check(status: HostStatus) -> None:
                 bad("cameras", f"camera {cam.id}: delay_ms must be null or finite >= 0, got {cam.delay_ms!r}")
         if min(cam.frames, cam.fused, *cam.dropped.values(), 0) < 0 or len(cam.problems) > 16:
             bad("cameras", f"camera {cam.id}: counters must be >= 0 and problems at most 16")
+        cal = cam.calibration
+        if cal is not None and (cal.state not in ("unknown", "ok", "suspect", "moved") or cal.samples < 0
+                                or any(v is not None and not 0.0 <= v < math.inf for v in (cal.residual_deg, cal.residual_px))):
+            bad("cameras", f"camera {cam.id}: calibration state must be unknown, ok, suspect or moved, residuals null or finite >= 0")
 
 
 def encode(status: HostStatus) -> bytes:

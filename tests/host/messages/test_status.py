@@ -14,7 +14,8 @@ from superbody.host.messages import status as hs
 
 def make_camera(**change) -> hs.CameraStatus:
     fields = dict(id="3", alive=True, state="too_late", fps=14.9, delay_ms=hs.delay(1.9, 2.3), frames=300, fused=0,
-                  dropped={"too_late": 300}, problems=["too_late: frames arrive 2.30 s after capture (p95)"])
+                  dropped={"too_late": 300}, problems=["too_late: frames arrive 2.30 s after capture (p95)"],
+                  calibration=hs.Calibration(state="ok", residual_deg=0.8, residual_px=3.1, samples=1200))
     return hs.CameraStatus(**{**fields, **change})
 
 
@@ -48,7 +49,7 @@ def test_round_trip_and_field_order() -> None:
                                              "queue_dropped", "published", "health", "cameras"]
     assert hs.decode(payload) == status
     cam = _strict_loads(payload)["cameras"][0]
-    assert list(cam) == ["id", "alive", "state", "fps", "delay_ms", "frames", "fused", "dropped", "problems"]
+    assert list(cam) == ["id", "alive", "state", "fps", "delay_ms", "frames", "fused", "dropped", "problems", "calibration"]
 
 
 def test_a_status_of_a_host_before_issue_37_still_decodes() -> None:
@@ -80,6 +81,7 @@ def test_decoder_ignores_fields_it_does_not_know() -> None:
         ({"health": hs.Health(state="fine", reasons=[])}, "health"),                        # ok or degraded only
         ({"cameras": [make_camera(state="sleepy")]}, "cameras"),                          # a state it does not have
         ({"cameras": [make_camera(delay_ms=hs.Delay(p50=-1.0, p95=None))]}, "cameras"),  # a negative delay
+        ({"cameras": [make_camera(calibration=hs.Calibration(state="ok", residual_deg=math.nan, samples=3))]}, "cameras"),  # NaN: use null
         ({"published": 1.0}, "published"),                            # a float for a counter
     ],
 )
