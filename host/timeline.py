@@ -9,7 +9,8 @@ is the one part of the host that knows it:
   "seq_backwards" (the sequence number went back without a restart; a restarted node is recognised
   after ``restart_gap_s`` without frames, when the frame after a refused one continues the new
   count, or by ``reset_camera``). Across cameras: "stale" (older than anyone is kept) and
-  "too_late" (captured before the watermark: the host has already fused that instant). A camera's
+  "too_late" (captured before the watermark: the host has already fused that instant; but for a
+  camera joining, below). A camera's
   ordering reference is its newest stamp capped at the host's clock, so a frame stamped in the
   future cannot make the camera's real frames "late".
 - **measurement**, per camera, continuously: the delivery delay (arrival minus capture) over its
@@ -21,8 +22,9 @@ is the one part of the host that knows it:
   than that (dead slow, stalled, gone) holds nobody back; its frames then arrive behind the
   watermark and are dropped as "too_late", counted and reported, never used silently out of time.
   A camera that joins (its first frame, or its first after a silence) behind the watermark stops
-  it until its frames catch up, at most ``max_delay_s``; the frames it loses meanwhile are counted
-  but are not a problem of its own.
+  it until its frames catch up, at most ``max_delay_s``; meanwhile its frames are used all the same,
+  released at the next step a little out of order (the tracker and the filter take an older
+  point with the distance walked since as extra noise), rather than lost.
   For the first ``max_delay_s`` after the host starts, until every camera of the site has
   delivered, the watermark waits that long, so a slow camera's first frames are not too late
   for want of having been heard of.
@@ -178,18 +180,18 @@ class Timeline:
             return "unknown_camera"
         t, now = int(obs.stamp_ns), int(now_ns)
         if cam.last_arrival_ns is None or now - cam.last_arrival_ns > self._max_delay_ns:
-            cam.joined_ns = now  # (re)joining: until its frames catch up with the watermark, being too late is expected
+            cam.joined_ns = now  # (re)joining: its first frames may be behind the watermark, and are used
         cam.last_arrival_ns = now
         cam._delays.append(now - t)  # of every frame that arrives: a camera too late to be used is measured too
-        why = self._refusal(cam, obs, t, now)
+        joining = cam.joined_ns is not None and now - cam.joined_ns <= self._max_delay_ns and t >= now - self._max_delay_ns
+        why = self._refusal(cam, obs, t, now, joining)
         if why in (None, "too_late") and (cam.heard_ns is None or t > cam.heard_ns) and t <= now:
             # A camera that joins late (a restarted node, a slow one) holds the watermark from now
             # on: it stops until the camera's frames catch up with it, then they are used.
             cam.heard_ns = t
         if why is not None:
             cam.dropped[why] += 1
-            joining = why == "too_late" and cam.joined_ns is not None and now - cam.joined_ns <= self._max_delay_ns
-            cam._events.append((now, "joining" if joining else why))
+            cam._events.append((now, why))
             if why == "seq_backwards":  # remembered: if the next frame follows it, the node restarted
                 assert cam._order is not None
                 cam._order = cam._order._replace(back_seq=int(obs.seq), back_ns=t)
@@ -205,10 +207,10 @@ class Timeline:
         heapq.heappush(self._pending, (t, next(self._arrivals), obs))
         return None
 
-    def _refusal(self, cam: CameraTimeline, obs: Observation, t: int, now: int) -> str | None:
+    def _refusal(self, cam: CameraTimeline, obs: Observation, t: int, now: int, joining: bool) -> str | None:
         if now - t >= self._stale_ns:
             return "stale"
-        if self._mark_ns is not None and t < self._mark_ns:
+        if self._mark_ns is not None and t < self._mark_ns and not joining:
             return "too_late"
         o = cam._order
         if o is None:
