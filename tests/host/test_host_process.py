@@ -181,3 +181,30 @@ def test_cameras_late_by_different_delays_are_all_fused_and_the_status_says_how_
         assert status["health"]["state"] == "ok", status["health"]
         for s in watch.subs:
             s.undeclare()
+
+
+def test_a_camera_key_with_two_publishers_is_named_in_the_status(processes):
+    """Issue 37: a second node publishing under a camera's key (a restarted node still running, or
+    a stranger) took the camera over with only "duplicate" and "late" counts as a trace. The
+    status names it; the other cameras stay fine."""
+    port = free_port()
+    site = load_site(SITE)
+    conf = transport.session_config("peer", connect=[], listen=[f"tcp/127.0.0.1:{port}"])
+    with zenoh.open(conf) as session:
+        watch = HostWatch(session, site.name)
+        processes.start("host", "run", "--site", SITE, "--estimator", "analytic", "--status-every", "0.5",
+                        "--connect", f"tcp/127.0.0.1:{port}")
+        for cam in (*site.camera_ids, "1"):  # camera 1 twice
+            processes.start("edge", "run", "--site", SITE, "--camera", cam, "--seed", "3", "--people", "2",
+                            "--connect", f"tcp/127.0.0.1:{port}")
+
+        def named() -> bool:
+            cams = {c["id"]: c for c in watch.status[-1]["cameras"]} if watch.status else {}
+            return bool(cams) and cams["1"]["state"] == "two_publishers"
+
+        assert watch.wait(named, timeout=40), watch.status[-1] if watch.status else None
+        last = watch.status[-1]
+        assert any(r.startswith("camera 1: two_publishers") for r in last["health"]["reasons"]) and last["health"]["state"] == "degraded"
+        assert all(c["state"] == "ok" for c in last["cameras"] if c["id"] != "1"), last["cameras"]
+        for s in watch.subs:
+            s.undeclare()
