@@ -268,7 +268,7 @@ def _print_summary(s: dict) -> None:
     pm, ym = s["position_mae_mm"], s["yaw_mae_deg"]
     print(f"  position MAE vs truth:        {'-' if pm is None else f'{pm:.0f} mm'}")
     print(f"  yaw MAE vs truth:             {'-' if ym is None else f'{ym:.1f} deg'}")
-    print(f"  host latency p50 / p99:       {s['latency_ms']['p50']:.2f} / {s['latency_ms']['p99']:.2f} ms")
+    print(f"  capture-to-publish p50 / p99: {s['latency_ms']['p50']:.2f} / {s['latency_ms']['p99']:.2f} ms  (the age of what the host publishes)")
     print(f"  pose arrays published:        {s['poses_published']}")
     timing = s.get("camera_timing", {})
     if any(t["delay_s"] or t["jitter_s"] or t["fps"] is not None for t in timing.values()):
