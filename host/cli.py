@@ -8,7 +8,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import math
 import os
 import sys
 from pathlib import Path
@@ -42,21 +41,6 @@ def _unit(text: str) -> float:
     if not 0 < v <= 1:
         raise argparse.ArgumentTypeError(f"must be in (0, 1], got {text}")
     return v
-
-
-def _seconds_in(lo: float, hi: float, flag: str):
-    """An argparse type: seconds in [lo, hi], the error naming the flag and the range."""
-
-    def parse(text: str) -> float:
-        try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{flag} must be a number of seconds in [{lo}, {hi}], got {text!r}") from None
-        if not (math.isfinite(v) and lo <= v <= hi):
-            raise argparse.ArgumentTypeError(f"{flag} must be a number of seconds in [{lo}, {hi}], got {text}")
-        return v
-
-    return parse
 
 
 def _run_host(args: argparse.Namespace) -> int:
@@ -125,10 +109,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--estimator", choices=ESTIMATORS, default="auto",
                    help="pose estimator (default auto: hybrid when the model carries a hybrid calibration, else the network alone)")
     p.add_argument("--model", help="ONNX model (default: the shipped models/<site>.fp32.onnx)")
-    p.add_argument("--max-delay", type=_seconds_in(0.0, 1.9, "--max-delay"), default=None, metavar="S",
+    p.add_argument("--max-delay", type=float_in(0.0, 1.9, "--max-delay"), default=None, metavar="S",
                    help="longest the host waits for a camera's frames after their capture: poses are published this much in the past "
                         f"at most, and a camera that delivers later is left out and reported (default: [host] max_delay_s, else {HostConfig.max_delay_s})")
-    p.add_argument("--freshness", type=_seconds_in(0.01, 60.0, "--freshness"), default=None, metavar="S",
+    p.add_argument("--freshness", type=float_in(0.01, 60.0, "--freshness"), default=None, metavar="S",
                    help="a camera's view stays in a person's set S while captured at most this long before the instant the host fuses "
                         f"(default: [host] freshness_s, else {HostConfig.freshness_s})")
     p.add_argument("--d-max", type=_unit, default=None,

@@ -38,7 +38,7 @@ CASES = [
     (["host", "run", "--site", SITE, "--model", "{d}/empty.onnx"], "host run", "empty.onnx: not a loadable ONNX model (0 bytes)"),
     (["host", "run", "--site", SITE, "--model", "{d}/truncated.onnx"], "host run", "truncated.onnx: not a loadable ONNX model (3000 bytes)"),
     (["host", "run", "--site", "{d}/host-typo.toml", "--estimator", "analytic"], "host run", "[host.tracker]: unknown field(s) gate; allowed:"),
-    (["host", "run", "--site", SITE, "--estimator", "analytic", "--max-delay", "3"], "host run", "--max-delay must be a number of seconds in [0.0, 1.9]"),
+    (["host", "run", "--site", SITE, "--estimator", "analytic", "--max-delay", "3"], "host run", "--max-delay must be a number in [0, 1.9]"),
     (["edge", "run", "--site", SITE, "--camera", "1", "--connect", "foo"], "edge run", "--connect 'foo'"),
     (["edge", "run", "--site", SITE, "--camera", "1", "--connect", ""], "edge run", "--connect ''"),
     (["host", "run", "--site", SITE, "--estimator", "analytic", "--connect", "tcp/127.0.0.1:99999"], "host run", "[1, 65535]"),

@@ -29,6 +29,16 @@ CARD_POSITION_MM, CARD_YAW_DEG = 64.0, 7.6
 
 
 @pytest.mark.slow
+
+def start_site(processes, port: int, people: int, cameras=None, node_args=None) -> None:
+    """The analytic host (status every 0.5 s) and a simulated node per camera (``cameras``, default
+    the site's; one may appear twice), seed 3, all on loopback port ``port``."""
+    processes.start("host", "run", "--site", SITE, "--estimator", "analytic", "--status-every", "0.5",
+                    "--connect", f"tcp/127.0.0.1:{port}")
+    for cam in cameras or load_site(SITE).camera_ids:
+        processes.start("edge", "run", "--site", SITE, "--camera", cam, "--seed", "3", "--people", str(people),
+                        *(node_args or {}).get(cam, ()), "--connect", f"tcp/127.0.0.1:{port}")
+
 def test_three_people_sixty_seconds_and_a_camera_killed():
     """3 cameras, 3 people in distinct clothing, 60 simulated seconds at 3x, the shipped
     model; camera 3 dies at 30 s."""
@@ -52,11 +62,7 @@ def test_malformed_payloads_are_counted_and_the_host_keeps_publishing(processes)
     conf = transport.session_config("peer", connect=[], listen=[f"tcp/127.0.0.1:{port}"])
     with zenoh.open(conf) as session:
         watch = HostWatch(session, site.name)
-        processes.start("host", "run", "--site", SITE, "--estimator", "analytic", "--status-every", "0.5",
-                        "--connect", f"tcp/127.0.0.1:{port}")
-        for cam in site.camera_ids:
-            processes.start("edge", "run", "--site", SITE, "--camera", cam, "--seed", "3", "--people", "2",
-                            "--connect", f"tcp/127.0.0.1:{port}")
+        start_site(processes, port, 2)
         assert watch.wait(lambda: any(s["cameras_alive"] == ["1", "2", "3"] for s in watch.status), timeout=30)
         good = json.loads(wire.encode(SimCamera(World(site, 1, seed=0), "1").observe(time.time_ns())[0]))
         bad = {
@@ -97,11 +103,7 @@ def test_a_flood_on_one_camera_key_never_stops_the_host_nor_the_other_cameras(pr
     conf = transport.session_config("peer", connect=[], listen=[f"tcp/127.0.0.1:{port}"])
     with zenoh.open(conf) as session:
         watch = HostWatch(session, site.name)
-        processes.start("host", "run", "--site", SITE, "--estimator", "analytic", "--status-every", "0.5",
-                        "--connect", f"tcp/127.0.0.1:{port}")
-        for cam in site.camera_ids:
-            processes.start("edge", "run", "--site", SITE, "--camera", cam, "--seed", "3", "--people", "3",
-                            "--connect", f"tcp/127.0.0.1:{port}")
+        start_site(processes, port, 3)
         seen_by_others = lambda a: any({"2", "3"} & set(p.cameras) for p in a.people)  # noqa: E731
         assert watch.wait(lambda: sum(map(seen_by_others, watch.arrays[-20:])) >= 10, timeout=40), "the host never fused cameras 2 and 3"
         doc = json.loads(wire.encode(SimCamera(World(site, 2, seed=3), "1").observe(time.time_ns())[0]))
@@ -154,11 +156,7 @@ def test_cameras_late_by_different_delays_are_all_fused_and_the_status_says_how_
     delays = {"1": 0.1, "2": 0.8, "3": 1.2}
     with zenoh.open(conf) as session:
         watch = HostWatch(session, site.name)
-        processes.start("host", "run", "--site", SITE, "--estimator", "analytic", "--status-every", "0.5",
-                        "--connect", f"tcp/127.0.0.1:{port}")
-        for cam in site.camera_ids:
-            processes.start("edge", "run", "--site", SITE, "--camera", cam, "--seed", "3", "--people", "3", "--delay", str(delays[cam]),
-                            "--jitter", "0.05", "--connect", f"tcp/127.0.0.1:{port}")
+        start_site(processes, port, 3, node_args={c: ("--delay", str(d), "--jitter", "0.05") for c, d in delays.items()})
         fused_all = lambda a: any(set(p.cameras) == {"1", "2", "3"} for p in a.people)  # noqa: E731
         assert watch.wait(lambda: sum(map(fused_all, watch.arrays[-30:])) >= 15, timeout=60), "no person fused from all three cameras"
         t0 = time.monotonic()
@@ -192,11 +190,7 @@ def test_a_camera_key_with_two_publishers_is_named_in_the_status(processes):
     conf = transport.session_config("peer", connect=[], listen=[f"tcp/127.0.0.1:{port}"])
     with zenoh.open(conf) as session:
         watch = HostWatch(session, site.name)
-        processes.start("host", "run", "--site", SITE, "--estimator", "analytic", "--status-every", "0.5",
-                        "--connect", f"tcp/127.0.0.1:{port}")
-        for cam in (*site.camera_ids, "1"):  # camera 1 twice
-            processes.start("edge", "run", "--site", SITE, "--camera", cam, "--seed", "3", "--people", "2",
-                            "--connect", f"tcp/127.0.0.1:{port}")
+        start_site(processes, port, 2, cameras=(*site.camera_ids, "1"))  # camera 1 twice
 
         def named() -> bool:
             cams = {c["id"]: c for c in watch.status[-1]["cameras"]} if watch.status else {}
