@@ -42,16 +42,21 @@ def int_in(lo: int, hi: int, name: str):
     return parse
 
 
+def number_in(text: str, name: str, lo: float, hi: float, error: type[Exception] = ValueError) -> float:
+    """``text`` as a finite number in [lo, hi], else ``error`` naming the option and the range."""
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not (math.isfinite(v) and lo <= v <= hi):
+        raise error(f"{name} must be a number in [{lo:g}, {hi:g}], got {text!r}")
+    return v
+
+
 def float_in(lo: float, hi: float, name: str):
     """argparse type: a finite number in [lo, hi]; the error names the option and the range."""
     def parse(text: str) -> float:
-        try:
-            v = float(text)
-        except ValueError:
-            v = math.nan
-        if not (math.isfinite(v) and lo <= v <= hi):
-            raise argparse.ArgumentTypeError(f"{name} must be a number in [{lo:g}, {hi:g}], got {text!r}")
-        return v
+        return number_in(text, name, lo, hi, argparse.ArgumentTypeError)
     return parse
 
 

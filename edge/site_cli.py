@@ -13,10 +13,11 @@ fails is exit code 2 too, and ``import`` then writes nothing.
 from __future__ import annotations
 
 import argparse
-import math
 import re
 import sys
 from pathlib import Path
+
+from superbody.edge.cli_args import number_in
 
 __all__ = ["register", "import_main", "check_main", "floor_plot_main"]
 
@@ -81,15 +82,9 @@ def _fail(command: str, message: object) -> int:
 
 
 def _number(text: str, flag: str, lo: float, hi: float) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not (math.isfinite(v) and lo <= v <= hi):
-        from superbody.edge.calibration.frames import ImportFailure
+    from superbody.edge.calibration.frames import ImportFailure
 
-        raise ImportFailure(f"{flag} must be a number in [{lo:g}, {hi:g}], got {text!r}")
-    return v
+    return number_in(text, flag, lo, hi, ImportFailure)
 
 
 def _size(text: str | None) -> tuple[int, int] | None:

@@ -22,6 +22,8 @@ from dataclasses import replace
 from pathlib import Path
 from typing import cast
 
+from superbody.edge.cli_args import number_in
+
 __all__ = ["register"]
 
 _BOARD_FLAGS_HELP = {
@@ -92,16 +94,6 @@ def _fail(command: str, message: str) -> int:
     return 2
 
 
-def _number(text: str, flag: str, lo: float, hi: float) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not (math.isfinite(v) and lo <= v <= hi):
-        raise _ArgError(f"{flag} must be a number in [{lo:g}, {hi:g}], got {text!r}")
-    return v
-
-
 def _spec(args: argparse.Namespace):
     from superbody.edge.calibration.board import DICTIONARIES, BoardError, BoardSpec, parse_squares
 
@@ -109,8 +101,8 @@ def _spec(args: argparse.Namespace):
         nx, ny = parse_squares(args.squares)
     except BoardError as e:
         raise _ArgError(f"--{e}") from None
-    square = _number(args.square, "--square", 0.001, 10.0)
-    marker = _number(args.marker, "--marker", 0.001, 10.0)
+    square = number_in(args.square, "--square", 0.001, 10.0, _ArgError)
+    marker = number_in(args.marker, "--marker", 0.001, 10.0, _ArgError)
     if not marker < square:
         raise _ArgError(f"--marker must be smaller than --square ({square:g}), got {marker:g}")
     if args.dict.upper() not in {n.upper() for n in DICTIONARIES}:
@@ -125,7 +117,7 @@ def _origin(text: str) -> tuple[float, float]:
     parts = text.split(",")
     if len(parts) != 2:
         raise _ArgError(f"--origin must be X,Y in metres (e.g. 0.5,-1.2), got {text!r}")
-    return tuple(_number(p.strip(), "--origin", -1e4, 1e4) for p in parts)  # type: ignore[return-value]
+    return tuple(number_in(p.strip(), "--origin", -1e4, 1e4, _ArgError) for p in parts)  # type: ignore[return-value]
 
 
 def _read_image(path: Path, flag: str):
@@ -181,7 +173,7 @@ def _run_board(args: argparse.Namespace) -> int:
     try:
         spec = _spec(args)
         origin = _origin(args.origin)
-        yaw_deg = _number(args.yaw, "--yaw", -360.0, 360.0)
+        yaw_deg = number_in(args.yaw, "--yaw", -360.0, 360.0, _ArgError)
         site = load_site(args.site)
         try:
             cam = site.camera(args.camera)
