@@ -64,3 +64,14 @@ def test_every_host_setting_is_documented_in_install_md():
         for f in dataclasses.fields(cls):
             if f.name not in ("tracker", "filter"):
                 assert f"`{f.name}`" in section, f"{cls.__name__}.{f.name} is not in docs/install.md's [host] section"
+
+
+def test_the_install_guides_host_example_is_a_valid_host_table():
+    import re
+
+    from tests.conftest import ROOT
+
+    blocks = re.findall(r"```toml\n(.*?)```", (ROOT / "docs" / "install.md").read_text(), re.S)
+    (host,) = [b for b in blocks if b.lstrip().startswith("[host]")]
+    cfg = host_config(parse_site({**BASE, **tomllib.loads(host)}, path="lab.toml"))
+    assert cfg.max_delay_s == 1.0 and cfg.tracker.gate_m == 0.8
