@@ -12,6 +12,7 @@ PY := $(VENV)/bin/python
 LOCKS := deploy/requirements
 # 1: install from the locks; 0: the newest releases pyproject.toml allows (make test-latest).
 LOCKED ?= 1
+comma := ,
 
 .PHONY: demo test test-latest lock lint typecheck bench models clean blazepose soak fuzz
 
@@ -34,7 +35,7 @@ $(VENV)/.run-installed: pyproject.toml $(LOCKS)/runtime.txt
 # Development install: tests, training (torch) and plots.
 $(VENV)/.dev-installed: pyproject.toml $(LOCKS)/dev.txt
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(call install,dev,[dev,train])
+	$(call install,dev,[dev$(comma)train])
 	@touch $@ $(VENV)/.run-installed
 
 demo: $(VENV)/.run-installed
