@@ -8,6 +8,10 @@ extra tracks summed over them::
 
     python -m benchmarks.scene_seeds --scenes k,l --estimators geo-sim --seeds 11-40 --seconds 12 --jobs 2
     python -m benchmarks.scene_seeds --scenes k --estimators analytic --timing prompt,mixed
+    python -m benchmarks.scene_seeds --seeds 11-40 --tracker min_separation_m=0 --jobs 2
+
+``--tracker FIELD=VALUE`` (repeatable) sets a ``TrackerConfig`` field as a site file's
+``[host.tracker]`` would: with a rule's "0 turns it off" value, what the rule buys.
 
 ``--timing`` runs each camera timing of ``benchmarks.scenes.TIMINGS`` (default ``prompt``); a
 timing other than ``prompt`` is shown as ``estimator@timing``.
@@ -22,11 +26,12 @@ import argparse
 import os
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import nullcontext
 
-from benchmarks.scenes import ESTIMATOR_NAMES, SCENES, TIMINGS, _keys, run_scene
+from benchmarks.scenes import ESTIMATOR_NAMES, SCENES, TIMINGS, _keys, run_scene, tracker_setting
+from superbody.host.tracking.config import TrackerConfig
 
 __all__ = ["main", "parse_seeds", "summarise"]
 
@@ -50,9 +55,9 @@ def parse_seeds(text: str) -> list[int]:
     return sorted(seeds)
 
 
-def _one(job: tuple[str, float, int, tuple[str, ...], tuple[str, ...]]) -> tuple[str, int, dict]:
-    key, seconds, seed, estimators, timings = job
-    return key, seed, run_scene(key, seconds, seed, estimators, timings=timings)
+def _one(job: tuple[str, float, int, tuple[str, ...], tuple[str, ...], dict[str, object]]) -> tuple[str, int, dict]:
+    key, seconds, seed, estimators, timings, tracker = job
+    return key, seed, run_scene(key, seconds, seed, estimators, timings=timings, tracker=tracker)
 
 
 def summarise(runs: Sequence[tuple[str, int, dict]]) -> dict[tuple[str, str], dict]:
@@ -72,11 +77,19 @@ def summarise(runs: Sequence[tuple[str, int, dict]]) -> dict[tuple[str, str], di
 
 
 def main(scenes: Sequence[str], seeds: Sequence[int], seconds: float, estimators: Sequence[str], jobs: int = 1,
-         timings: Sequence[str] = ("prompt",)) -> int:
+         timings: Sequence[str] = ("prompt",), tracker: Mapping[str, object] | None = None) -> int:
     t = time.monotonic()
-    print(f"{len(scenes)} scene(s) x {len(seeds)} seed(s), {seconds:g} s each; bar = the real-recording bar (benchmarks.scenes)", flush=True)
+    tracker = dict(tracker or {})
+    try:
+        TrackerConfig(**tracker)  # a value out of range fails here, not in every worker
+    except ValueError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    changed = ", ".join(f"{k}={v}" for k, v in tracker.items()) or "the defaults"
+    print(f"{len(scenes)} scene(s) x {len(seeds)} seed(s), {seconds:g} s each; tracker: {changed}; "
+          "bar = the real-recording bar (benchmarks.scenes)", flush=True)
     print(f"{'scene':<6} {'seed':>4} {'estimator':<9} {'recall':>6} {'IDsw':>4} {'extra':>5} {'FP%':>5} {'pos50':>5} {'yaw50':>5} {'bar':>3}", flush=True)
-    jobs_ = [(key, seconds, seed, tuple(estimators), tuple(timings)) for key in scenes for seed in seeds]
+    jobs_ = [(key, seconds, seed, tuple(estimators), tuple(timings), tracker) for key in scenes for seed in seeds]
     runs: list[tuple[str, int, dict]] = []
     with ProcessPoolExecutor(max_workers=jobs) if jobs > 1 else nullcontext() as pool:
         for key, seed, sc in (pool.map if pool is not None else map)(_one, jobs_):
@@ -104,9 +117,11 @@ if __name__ == "__main__":
     p.add_argument("--timing", type=lambda s: _keys(s, list(TIMINGS), "timing"), default=["prompt"],
                    help=f"camera timings, e.g. prompt,mixed (default prompt; any of {','.join(TIMINGS)})")
     p.add_argument("--jobs", type=int, default=1, help="runs in this many processes at once")
+    p.add_argument("--tracker", type=tracker_setting, action="append", default=[], metavar="FIELD=VALUE",
+                   help="set a TrackerConfig field, as [host.tracker] does (repeatable; e.g. min_separation_m=0)")
     a = p.parse_args()
     if not 1 <= a.jobs <= (os.cpu_count() or 1) * 4:
         p.error(f"--jobs must be in [1, {(os.cpu_count() or 1) * 4}], got {a.jobs}")
     if not 1.0 <= a.seconds <= 3600.0:
         p.error(f"--seconds must be in [1, 3600], got {a.seconds}")
-    sys.exit(main(a.scenes, a.seeds, a.seconds, a.estimators, a.jobs, a.timing))
+    sys.exit(main(a.scenes, a.seeds, a.seconds, a.estimators, a.jobs, a.timing, dict(a.tracker)))

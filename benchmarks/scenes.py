@@ -134,10 +134,11 @@ from superbody.host.aggregator import Aggregator, HostConfig
 from superbody.host.estimation import build_estimator, default_model
 from superbody.host.estimation.analytic import AnalyticEstimator
 from superbody.host.estimation.estimator import Estimates, estimate_detailed
+from superbody.host.tracking.config import TrackerConfig
 from superbody.models.evaluation.temporal import SIGNATURE  # one flat histogram: identical clothing on everyone
 
 __all__ = ["Scene", "SCENES", "Timing", "TIMINGS", "Recording", "MotScorer", "Visibility", "simulate", "deliveries", "replay",
-           "run_scene", "main"]
+           "run_scene", "tracker_setting", "main"]
 
 FPS: Final = 15.0
 T0_NS: Final = 1_700_000_000 * 1_000_000_000  # every scene starts here (the worlds' epoch)
@@ -758,10 +759,39 @@ def result_key(estimator: str, timing: str) -> str:
     return estimator if timing == "prompt" else f"{estimator}@{timing}"
 
 
+def tracker_setting(text: str) -> tuple[str, object]:
+    """``"FIELD=VALUE"`` (a ``TrackerConfig`` field, as ``[host.tracker]`` sets it) as ``(field, value)``,
+    the value of the field's type; checked against the field's range by ``run_scene``.
+
+    Raises:
+        argparse.ArgumentTypeError: no ``=``, an unknown field (listing them) or a value not of its type.
+    """
+    name, eq, raw = (part.strip() for part in text.partition("="))
+    types = {f.name: type(getattr(TrackerConfig(), f.name)) for f in dataclasses.fields(TrackerConfig)}
+    if not eq or name not in types:
+        raise argparse.ArgumentTypeError(f"--tracker must be FIELD=VALUE with FIELD one of {', '.join(types)}; got {text!r}")
+    kind = types[name]
+    try:
+        if kind is bool:
+            if raw.lower() not in ("true", "false"):
+                raise ValueError
+            return name, raw.lower() == "true"
+        return name, kind(raw)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--tracker {name} must be {'true or false' if kind is bool else 'an integer' if kind is int else 'a number'}, "
+                                         f"got {raw!r}") from None
+
+
 def run_scene(key: str, seconds: float, seed: int, estimators: Sequence[str] = ESTIMATOR_NAMES, progress: bool = False,
-              timings: Sequence[str] = ("prompt",)) -> dict:
+              timings: Sequence[str] = ("prompt",), tracker: Mapping[str, object] | None = None) -> dict:
     """Simulate one scene and score every estimator that can serve it, under each camera timing
-    (results keyed by ``result_key``)."""
+    (results keyed by ``result_key``); ``tracker`` sets ``TrackerConfig`` fields (the rest keep
+    their defaults).
+
+    Raises:
+        ValueError: an unknown scene or timing, or a tracker value out of its field's range.
+    """
+    config = HostConfig(tracker=dataclasses.replace(TrackerConfig(), **dict(tracker or {})))
     if key not in SCENES:
         raise ValueError(f"unknown scene {key!r}; scenes: {', '.join(f'{k} ({SCENES[k]().name})' for k in SCENES)}")
     bad = [t for t in timings if t not in TIMINGS]
@@ -785,7 +815,7 @@ def run_scene(key: str, seconds: float, seed: int, estimators: Sequence[str] = E
         for timing in timings:
             tm = TIMINGS[timing]
             t = time.monotonic()
-            r = replay(scene, recordings[tm.camera_fps(n)], est, label, progress=progress, timing=tm, seed=seed)
+            r = replay(scene, recordings[tm.camera_fps(n)], est, label, config, progress=progress, timing=tm, seed=seed)
             r["estimator"], r["replay_s"] = label, time.monotonic() - t
             per_estimator[result_key(name, timing)] = r
     return out

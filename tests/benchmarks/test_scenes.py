@@ -7,6 +7,7 @@ The scene tests assert what each scene is built to exercise and what must hold t
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import subprocess
@@ -451,3 +452,26 @@ def test_run_scene_scores_each_timing_under_its_own_key():
         assert 0.0 <= r["empty_in_view"] <= 1.0 or math.isnan(r["empty_in_view"])
     with pytest.raises(ValueError, match="unknown timing 'late9'; timings: prompt, late0.3, late0.8, mixed, mixedfps"):
         scenes.run_scene("k", 3.0, 1, ("analytic",), timings=("late9",))
+
+
+def test_tracker_settings_reach_the_host_the_scenes_replay_through():
+    base = scenes.run_scene("d", 4.0, 1, ("analytic",))["estimators"]["analytic"]
+    never = scenes.run_scene("d", 4.0, 1, ("analytic",), tracker={"confirm_after_s": 600.0})["estimators"]["analytic"]
+    assert base["tracker"]["confirmed"] > 0 and base["recall"] > 0.5
+    assert never["tracker"]["confirmed"] == 0 and never["tracker"]["new_candidates"] > 0
+    with pytest.raises(ValueError, match=r"TrackerConfig.gate_m must be a number in \(0.0, 100.0\], got -1"):
+        scenes.run_scene("d", 4.0, 1, ("analytic",), tracker={"gate_m": -1.0})
+
+
+@pytest.mark.parametrize(("text", "expected"), [("gate_m=0.8", ("gate_m", 0.8)), (" min_joints = 4 ", ("min_joints", 4)),
+                                                ("use_geometry=False", ("use_geometry", False))])
+def test_tracker_settings_parse_as_their_fields_type(text, expected):
+    assert scenes.tracker_setting(text) == expected
+
+
+@pytest.mark.parametrize(("text", "message"), [("gate_m", "FIELD=VALUE with FIELD one of confirm_after_s"),
+                                               ("gates=1", "FIELD=VALUE"), ("min_joints=3.5", "min_joints must be an integer, got '3.5'"),
+                                               ("use_geometry=1", "use_geometry must be true or false")])
+def test_tracker_settings_refuse_unknown_fields_and_wrong_types(text, message):
+    with pytest.raises(argparse.ArgumentTypeError, match=message):
+        scenes.tracker_setting(text)
