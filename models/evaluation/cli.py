@@ -370,23 +370,25 @@ def _eval_temporal(args, raw, samples, site, estimators: dict, host_names: dict,
     """
     import numpy as np
 
+    from superbody.host.settings import host_config
     from superbody.models.evaluation.evaluate import format_table, score
     from superbody.models.evaluation.temporal import replay, view_stamps
     from superbody.models.evaluation.temporal_scores import format_replay, replay_summary
 
+    config = host_config(site)  # the host as the site file sets it up ([host]; SiteError is a ValueError)
     stamps = view_stamps(raw)
     truth = np.array([s.truth for s in samples])
     poses, summaries = {}, {}
     for name, est in estimators.items():
-        rep = replay(samples, stamps, predictions[name], site, est, host_names.get(name, name), at=args.temporal_at)
+        rep = replay(samples, stamps, predictions[name], site, est, host_names.get(name, name), config, at=args.temporal_at)
         poses[name] = rep.poses
         summaries[name] = replay_summary(rep, predictions[name], truth, args.truth_offset)
     reports = score(samples, {**predictions, **{f"{n} temporal": p for n, p in poses.items()}}, args.truth_offset)
     table = {}
     for name in estimators:
         table[f"{name} per-frame"], table[f"{name} temporal"] = reports[name], reports[f"{name} temporal"]
-    print(f"temporal: replayed in capture-time order through the host aggregator (tracker, estimator, filter; host run's "
-          f"defaults), scored at each sample's {args.temporal_at} view; {_SIGNATURE_NOTE}")
+    settings = "the site file's [host] settings" if site.host else "host run's defaults"
+    print(f"temporal: replayed in capture-time order through the host aggregator (tracker, estimator, filter; {settings}), scored at each sample's {args.temporal_at} view; {_SIGNATURE_NOTE}")
     print(format_table(table, args.truth_offset))
     for name in estimators:
         print(format_replay(name, summaries[name]))

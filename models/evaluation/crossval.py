@@ -177,10 +177,12 @@ def _temporal(raw, samples, site, pred: NDArray, std: NDArray, analytic: NDArray
     from superbody.host.estimation.analytic import AnalyticEstimator
     from superbody.host.estimation.estimator import OnnxEstimator
     from superbody.host.estimation.hybrid import HybridEstimator
+    from superbody.host.settings import host_config
     from superbody.models import hybrid_fit
     from superbody.models.data.wtf import truth_to_torso
     from superbody.models.evaluation.temporal import replay, view_stamps
 
+    config = host_config(site)  # the host as the site file's [host] sets it up
     stamps = view_stamps(raw)
     truth = truth_to_torso(np.array([s.truth for s in samples]), offset)
     cams = np.array([len(s.views) for s in samples])
@@ -190,10 +192,10 @@ def _temporal(raw, samples, site, pred: NDArray, std: NDArray, analytic: NDArray
         held, train = fold_of == k, fold_of != k
         hybrid_fit.write_calibration(path, *hybrid_fit.fit_calibration(pred[train], std[train], analytic[train], pair[train], truth[train], cams[train]))
         net = OnnxEstimator(path, site)  # the host's --estimator onnx on it: the calibrated sigmas feed the filter
-        net_live[held] = replay(samples, stamps, pred, site, net, f"onnx:fold{k}").poses[held]
-        hyb_live[held] = replay(samples, stamps, lofo, site, HybridEstimator(net, site), f"hybrid:fold{k}").poses[held]
+        net_live[held] = replay(samples, stamps, pred, site, net, f"onnx:fold{k}", config).poses[held]
+        hyb_live[held] = replay(samples, stamps, lofo, site, HybridEstimator(net, site), f"hybrid:fold{k}", config).poses[held]
         log.info("fold %d: replayed through the host aggregator", k)
-    geo_live = replay(samples, stamps, analytic, site, AnalyticEstimator(site), "analytic").poses
+    geo_live = replay(samples, stamps, analytic, site, AnalyticEstimator(site), "analytic", config).poses
     return {"hybrid": lofo, "temporal_network": net_live, "temporal_hybrid": hyb_live, "temporal_analytic": geo_live}
 
 

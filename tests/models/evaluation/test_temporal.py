@@ -396,3 +396,21 @@ def test_cli_temporal_bad_arguments_are_one_line_exit_2(extra, expected, dev_jso
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and err[0].startswith(f"superbody eval: error: {expected}"), err
     assert not json_out.exists()
+
+
+def test_cli_temporal_runs_the_host_as_the_site_files_host_table_sets_it_up(dev_json, dev, tmp_path):
+    """A site whose tracker confirms nobody within the recording publishes nobody: every sample
+    keeps its per-frame pose. A value out of range is refused, naming the table and field."""
+    samples, _stamps, per_frame = dev
+    slow = tmp_path / "slow.toml"
+    slow.write_text(WTF_SITE.read_text() + "\n[host.tracker]\nconfirm_after_s = 600.0\n")
+    csv_out, expected = tmp_path / "p.csv", tmp_path / "expected.csv"
+    proc = _eval("--dataset", str(dev_json), "--site", str(slow), "--estimator", "analytic", "--temporal", "--predictions-out", str(csv_out))
+    assert proc.returncode == 0, proc.stderr
+    assert "the site file's [host] settings" in proc.stdout
+    write_predictions_csv(expected, samples, per_frame, TRUTH_OFFSET_M)
+    assert csv_out.read_text() == expected.read_text()
+    bad = tmp_path / "bad.toml"
+    bad.write_text(WTF_SITE.read_text() + "\n[host.tracker]\ngate_m = -1.0\n")
+    proc = _eval("--dataset", str(dev_json), "--site", str(bad), "--estimator", "analytic", "--temporal")
+    assert proc.returncode == 2 and "[host.tracker]: TrackerConfig.gate_m must be a number in (0.0, 100.0], got -1.0" in proc.stderr, proc.stderr
