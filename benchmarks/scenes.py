@@ -134,6 +134,7 @@ from superbody.host.aggregator import Aggregator, HostConfig
 from superbody.host.estimation import build_estimator, default_model
 from superbody.host.estimation.analytic import AnalyticEstimator
 from superbody.host.estimation.estimator import Estimates, estimate_detailed
+from superbody.host.settings import host_config
 from superbody.host.tracking.config import TrackerConfig
 from superbody.models.evaluation.temporal import SIGNATURE  # one flat histogram: identical clothing on everyone
 
@@ -785,19 +786,20 @@ def tracker_setting(text: str) -> tuple[str, object]:
 def run_scene(key: str, seconds: float, seed: int, estimators: Sequence[str] = ESTIMATOR_NAMES, progress: bool = False,
               timings: Sequence[str] = ("prompt",), tracker: Mapping[str, object] | None = None) -> dict:
     """Simulate one scene and score every estimator that can serve it, under each camera timing
-    (results keyed by ``result_key``); ``tracker`` sets ``TrackerConfig`` fields (the rest keep
-    their defaults).
+    (results keyed by ``result_key``), the host set up by ``host.settings.host_config``: its site's
+    ``[host]`` table with ``tracker``'s ``TrackerConfig`` fields on top.
 
     Raises:
-        ValueError: an unknown scene or timing, or a tracker value out of its field's range.
+        ValueError: an unknown scene or timing; a tracker value out of its field's range (a
+            ``SiteError`` naming ``[host.tracker]`` and the field).
     """
-    config = HostConfig(tracker=dataclasses.replace(TrackerConfig(), **dict(tracker or {})))
     if key not in SCENES:
         raise ValueError(f"unknown scene {key!r}; scenes: {', '.join(f'{k} ({SCENES[k]().name})' for k in SCENES)}")
     bad = [t for t in timings if t not in TIMINGS]
     if bad:
         raise ValueError(f"unknown timing {bad[0]!r}; timings: {', '.join(TIMINGS)}")
     scene = SCENES[key]()
+    config = host_config(scene.site, tracker=tracker)  # the host as its site file and these settings set it up
     n = len(scene.site.cameras)
     t = time.monotonic()
     recordings: dict[tuple[float, ...], Recording] = {}  # one simulation per set of camera rates

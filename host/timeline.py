@@ -9,10 +9,9 @@ is the one part of the host that knows it:
   "seq_backwards" (the sequence number went back without a restart; a restarted node is recognised
   after ``restart_gap_s`` without frames, when the frame after a refused one continues the new
   count, or by ``reset_camera``). Across cameras: "stale" (older than anyone is kept) and
-  "too_late" (captured before the watermark: the host has already fused that instant; but for a
-  camera joining, below). A camera's
-  ordering reference is its newest stamp capped at the host's clock, so a frame stamped in the
-  future cannot make the camera's real frames "late".
+  "too_late" (captured before the watermark: the host has already fused that instant; a joining
+  camera's first frames excepted, below). A camera's ordering reference is its newest stamp capped
+  at the host's clock, so a frame stamped in the future cannot make the camera's real frames "late".
 - **measurement**, per camera, continuously: the delivery delay (arrival minus capture) over its
   last frames, its frame period and rate, frames admitted, fused and dropped by reason (``stats``).
 - **the watermark** (``watermark``): the newest capture instant up to which every camera still
