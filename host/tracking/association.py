@@ -13,7 +13,7 @@ from scipy.optimize import linear_sum_assignment
 
 from superbody.edge.colour import bhattacharyya_matrix
 from superbody.host.tracking.config import TrackerConfig
-from superbody.host.tracking.evidence import UNCORROBORATED_COST
+from superbody.host.tracking.evidence import UNCORROBORATED_COST, sigmas_from
 from superbody.host.tracking.motion import NS_PER_S, predict_positions
 from superbody.host.tracking.reid import REID_MARGIN
 from superbody.host.tracking.track import BINS, Track
@@ -145,7 +145,9 @@ def associate(t: int, tracks: list[Track], views: FrameViews, cfg: TrackerConfig
 
     The cost: the colour distance over ``d_max`` (the paper's rule: feasible below it) plus, with
     ``use_geometry``, ``geometry_weight`` times the ground distance over the gate (feasible within
-    ``gate_m`` plus the view's and the prediction's sigma), a cue that cannot be computed costing
+    ``gate_m`` plus the view's and the prediction's sigma, and where one body could stand: within
+    ``same_body_sigmas`` of the prediction, the view's error sure across its camera's line of sight,
+    as set S is tested: ``evidence.sigmas_from``), a cue that cannot be computed costing
     ``_UNKNOWN_COST``, and ``UNCORROBORATED_COST`` for a candidate its cameras do not corroborate.
     A pair is feasible only if a cue vouches for it: colours that point to that track
     (``clearly_best``) or a ground point surer than ``gate_m``. Confirmed people are assigned first;
@@ -192,7 +194,10 @@ def associate(t: int, tracks: list[Track], views: FrameViews, cfg: TrackerConfig
         geo_known = has_ground[:, None] & has_pos[None, :]
         with np.errstate(invalid="ignore"):
             near = geo_known & (geo_d <= radius)
-            feasible &= ~geo_known | near
+            body = near
+            if cfg.same_body_sigmas > 0:  # and where one body could stand: the set S test, per view
+                body = near & (sigmas_from(ground, sigma, views.camera_xy, pos, pos_std**2, cfg.same_body_across_m) <= cfg.same_body_sigmas)
+            feasible &= ~geo_known | body
             cost += cfg.geometry_weight * np.where(geo_known, geo_d / radius, _UNKNOWN_COST)
         vouched = clearly_best(colour_d, REID_MARGIN) | (geo_known & (sigma < cfg.gate_m)[:, None])
     cost += UNCORROBORATED_COST * np.array([not tr.corroborated(cfg.confirm_min_support) for tr in tracks])[None, :]

@@ -60,9 +60,10 @@ class TrackerConfig:
         min_separation_m: a candidate closer than this to a confirmed person is that person, not
             a newcomer, and two confirmed tracks that stay this close are merged
             (``host.tracking.evidence``; 0 turns the rule off).
-        same_body_sigmas: each view in a person's set S must put them within this many combined
-            1-sigmas of the point the other views agree on, or the worst is left out
-            (``host.tracking.evidence.one_body``; 0 turns the rule off). 3: on dev.json (one
+        same_body_sigmas: a view matches a track only if it puts the person within this many
+            combined 1-sigmas of the track's predicted position, and each view in a person's set S
+            must put them within as many of the point the other views agree on, or the worst is
+            left out (``host.tracking.evidence``; 0 turns both tests off). 3: on dev.json (one
             person) the live CV is unchanged at 3; at 2.5 real views were left out (live yaw
             7.61 -> 7.73 deg, with the rule's first, pairwise form).
         same_body_across_m: a view's ground point's 1-sigma across its camera's line of sight,

@@ -32,7 +32,10 @@ keep landing inside a candidate's gate. Two physical facts tell them from people
   bearing comes from pixels (``TrackerConfig.same_body_across_m``): a view of someone 0.35 m to the
   side is told from a range error. The worst view is left out (ties: the one farthest from the
   track's position, then the one with fewest joints) until the rest agree, and those left out
-  wait for their cameras' next frames.
+  wait for their cameras' next frames. The same test, against the track's predicted position
+  (``sigmas_from``), decides which tracks a view may be matched to at all: a person whose own view
+  is missing from a camera's frame (hidden behind someone) otherwise took a neighbour's view
+  inside their 1 m gate, 6 sigmas off, and starved the neighbour's candidate.
 """
 
 from __future__ import annotations
@@ -49,10 +52,11 @@ from superbody.edge.site import Obstacle
 from superbody.host.tracking.motion import NS_PER_S
 from superbody.host.tracking.track import StampedView, Track
 
-__all__ = ["EDGE_MARGIN", "MERGE_AFTER_S", "TORSO_CENTRE_M", "UNCORROBORATED_COST", "clearly_sees", "corroborated", "too_close", "coincident", "seen_together", "one_body", "set_s_of_one_body"]
+__all__ = ["EDGE_MARGIN", "MERGE_AFTER_S", "TORSO_CENTRE_M", "UNCORROBORATED_COST", "clearly_sees", "hidden_behind", "corroborated", "too_close", "coincident", "seen_together", "one_body", "set_s_of_one_body", "sigmas_from"]
 
 TORSO_CENTRE_M = 1.15  # height of a standing adult's torso centre (between hips 0.9 m and shoulders 1.4 m)
 EDGE_MARGIN = 0.1  # fraction of the image's width and height left out on each side
+BODY_RADIUS_M = 0.25  # half a standing adult's width at the shoulders, arms included
 MERGE_AFTER_S = 0.5  # how long two confirmed tracks may stand inside each other before they are one
 # Matching a view to a candidate its cameras do not corroborate costs this much more (normalised
 # like a ground distance over its gate). A track's gate widens with its uncertainty, so a vague
@@ -73,6 +77,26 @@ def clearly_sees(cam: Camera, xy: NDArray, obstacles: Sequence[Obstacle] = ()) -
     people are not modelled.
     """
     return visible(cam, xy, (TORSO_CENTRE_M,), EDGE_MARGIN, obstacles=obstacles)
+
+
+def hidden_behind(camera_xy: NDArray, xy: NDArray, others: NDArray) -> NDArray[np.bool_]:
+    """(N,) whether someone of ``others`` (M, 2) stands in front of each floor point (N, 2), seen
+    from a camera standing on ``camera_xy`` (2,): nearer to it, and within ``BODY_RADIUS_M`` of the
+    line of sight. In a crowd, a person behind another is missed by that camera's detector, so its
+    frames are no chance to see them (a camera 1 m up sees nothing of them; one 2.2 m up, their
+    head at most). A point in ``others`` that is the point itself (closer than 1 mm) hides nothing.
+    """
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    o = np.asarray(others, dtype=np.float64).reshape(-1, 2)
+    if not len(xy) or not len(o):
+        return np.zeros(len(xy), dtype=bool)
+    d = xy - np.asarray(camera_xy, dtype=np.float64)[None, :]  # (N, 2) lines of sight
+    q = o[None, :, :] - np.asarray(camera_xy, dtype=np.float64)[None, None, :]  # (1, M, 2)
+    dd = np.maximum((d**2).sum(axis=1), 1e-12)[:, None]  # (N, 1)
+    s = (q * d[:, None, :]).sum(axis=2) / dd  # (N, M) where along each line of sight the other stands
+    across = np.abs(q[..., 0] * d[:, None, 1] - q[..., 1] * d[:, None, 0]) / np.sqrt(dd)  # (N, M)
+    itself = np.linalg.norm(o[None, :, :] - xy[:, None, :], axis=2) < 1e-3
+    return np.asarray(((s > 0) & (s < 1) & (across < BODY_RADIUS_M) & ~itself).any(axis=1), dtype=bool)
 
 
 def corroborated(tr: Track, min_support: float) -> bool:
@@ -179,6 +203,30 @@ def one_body(views: dict[str, StampedView], near_xy: NDArray | None, sigmas: flo
         order = np.lexsort((joints[k], -np.nan_to_num(far[k]), -np.round(d2, 6)))
         keep[k[order[0]]] = False
     return [cam for cam, kept, p in zip(cams, keep, placed, strict=True) if kept or not p]
+
+
+def sigmas_from(ground: NDArray, std: NDArray, camera_xy: NDArray, xy: NDArray, var: NDArray, across_m: float) -> NDArray[np.float64]:
+    """(K, M) how many combined 1-sigmas each of one camera's K ground points lies from each of M
+    predicted positions: the views' error as in ``one_body`` (``std`` (K,) along the camera's line of
+    sight, ``across_m`` across it, capped at ``std``) plus each prediction's (``var`` (M,), the same
+    in every direction). NaN where a point or a prediction is unknown.
+
+    Args:
+        ground: (K, 2) ground points; std: (K,) their 1-sigma; camera_xy: (2,) the camera's floor point.
+        xy: (M, 2) predicted positions; var: (M,) their variance, m^2.
+    """
+    u = ground - np.asarray(camera_xy, dtype=np.float64)[None, :]  # (K, 2) line of sight
+    norm = np.hypot(u[:, 0], u[:, 1])
+    with np.errstate(all="ignore"):  # NaN rows (no ground point) stay NaN
+        u = np.where((norm > 0)[:, None], u / np.where(norm > 0, norm, 1.0)[:, None], 0.0)
+        across2 = np.minimum(across_m, std) ** 2  # (K,)
+        extra = std**2 - across2
+        a = across2[:, None] + extra[:, None] * u[:, 0, None] ** 2 + var[None, :]  # (K, M) covariance [[a, b], [b, c]]
+        b = np.broadcast_to((extra * u[:, 0] * u[:, 1])[:, None], a.shape)
+        c = across2[:, None] + extra[:, None] * u[:, 1, None] ** 2 + var[None, :]
+        g = ground[:, None, :] - xy[None, :, :]  # (K, M, 2)
+        d2 = (c * g[..., 0] ** 2 - 2 * b * g[..., 0] * g[..., 1] + a * g[..., 1] ** 2) / (a * c - b * b)
+    return np.sqrt(d2)
 
 
 def set_s_of_one_body(tr: Track, fresh: dict[str, StampedView], sigmas: float, across_m: float) -> tuple[list[str], int]:

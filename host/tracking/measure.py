@@ -47,6 +47,7 @@ class FrameViews(NamedTuple):
     hists: NDArray[np.float32]  # (K, B) flattened histograms
     has_colour: NDArray[np.bool_]  # (K,) False for an empty histogram
     amps: NDArray[np.float64]  # (K, B) their amplitudes (association.py)
+    camera_xy: NDArray[np.float64]  # (2,) the camera's floor point: each ground point's line of sight
 
 
 
@@ -64,13 +65,13 @@ def measure(obs: Observation, camera: Camera, cfg: TrackerConfig, stats: dict[st
     idx = idx[~copies]
     if not len(idx):
         return FrameViews(idx, n_joints, np.zeros((0, 2)), np.zeros(0), np.zeros(0, bool), np.zeros((0, BINS), np.float32),
-                          np.zeros(0, bool), np.zeros((0, BINS)))
+                          np.zeros(0, bool), np.zeros((0, BINS)), camera.t[:2].copy())
     bboxes = np.array([obs.people[i].bbox for i in idx])  # (K, 4)
     ground, sigma, _ = ground_points(kps[idx], bboxes, camera)  # (K, 2), (K,)
     has_ground = ~np.isnan(sigma)  # (K,)
     stats["no_ground_point"] += int((~has_ground).sum())
     hists = np.array([obs.people[i].histogram.reshape(-1) for i in idx])  # (K, B)
-    return FrameViews(idx, n_joints, ground, sigma, has_ground, hists, hists.sum(axis=1) > 0, amplitudes(hists))
+    return FrameViews(idx, n_joints, ground, sigma, has_ground, hists, hists.sum(axis=1) > 0, amplitudes(hists), camera.t[:2].copy())
 
 
 def duplicate_views(keypoints: NDArray, n_joints: NDArray) -> NDArray[np.bool_]:

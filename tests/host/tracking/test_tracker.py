@@ -480,14 +480,14 @@ def test_assign(cost, feasible, pairs):
 def test_joint_assignment_beats_greedy_in_the_tracker():
     same = 40.0  # everyone in the same colour: only geometry tells them apart
     tr = Tracker(SITE)
-    run(tr, (frame(cam, t, {"p": (0.0, 0.0, 0.0, same), "q": (1.2, 0.0, 0.0, same)}, seed=k)
+    run(tr, (frame(cam, t, {"p": (0.0, 0.0, 0.0, same), "q": (0.6, 0.0, 0.0, same)}, seed=k)
              for k, (cam, t) in enumerate(schedule(1.0))))
     t1, t2 = tr.tracks
-    assert np.allclose(t1.position, (0.0, 0.0), atol=0.1) and np.allclose(t2.position, (1.2, 0.0), atol=0.1)
-    # Next frame: view A at x=0.55 is nearest track 1; view B at x=-0.7 can only be track 1 (track 2
-    # is 1.9 m away, outside its gate). Greedy nearest-first gives A to track 1 and strands B.
+    assert np.allclose(t1.position, (0.0, 0.0), atol=0.1) and np.allclose(t2.position, (0.6, 0.0), atol=0.1)
+    # Next frame: view A at x=0.2 is nearest track 1; view B at x=-0.3 can only be track 1 (0.9 m
+    # from track 2, beyond one body's 3 sigmas). Greedy nearest-first gives A to track 1 and strands B.
     t = T0 + S
-    obs, _ = frame(C1, t, {"A": (0.55, 0.0, 0.0, same), "B": (-0.7, 0.0, 0.0, same)}, seed=999)
+    obs, _ = frame(C1, t, {"A": (0.2, 0.0, 0.0, same), "B": (-0.3, 0.0, 0.0, same)}, seed=999)
     matches = tr.update(obs)
     assert [m.status for m in matches] == ["matched", "matched"]
     assert [m.track_id for m in matches] == [t2.id, t1.id]
