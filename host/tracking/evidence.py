@@ -52,11 +52,10 @@ from superbody.edge.site import Obstacle
 from superbody.host.tracking.motion import NS_PER_S
 from superbody.host.tracking.track import StampedView, Track
 
-__all__ = ["EDGE_MARGIN", "MERGE_AFTER_S", "TORSO_CENTRE_M", "UNCORROBORATED_COST", "clearly_sees", "hidden_behind", "corroborated", "too_close", "coincident", "seen_together", "one_body", "set_s_of_one_body", "sigmas_from"]
+__all__ = ["EDGE_MARGIN", "MERGE_AFTER_S", "TORSO_CENTRE_M", "UNCORROBORATED_COST", "clearly_sees", "corroborated", "too_close", "coincident", "seen_together", "one_body", "set_s_of_one_body", "sigmas_from"]
 
 TORSO_CENTRE_M = 1.15  # height of a standing adult's torso centre (between hips 0.9 m and shoulders 1.4 m)
 EDGE_MARGIN = 0.1  # fraction of the image's width and height left out on each side
-BODY_RADIUS_M = 0.25  # half a standing adult's width at the shoulders, arms included
 MERGE_AFTER_S = 0.5  # how long two confirmed tracks may stand inside each other before they are one
 # Matching a view to a candidate its cameras do not corroborate costs this much more (normalised
 # like a ground distance over its gate). A track's gate widens with its uncertainty, so a vague
@@ -77,26 +76,6 @@ def clearly_sees(cam: Camera, xy: NDArray, obstacles: Sequence[Obstacle] = ()) -
     people are not modelled.
     """
     return visible(cam, xy, (TORSO_CENTRE_M,), EDGE_MARGIN, obstacles=obstacles)
-
-
-def hidden_behind(camera_xy: NDArray, xy: NDArray, others: NDArray) -> NDArray[np.bool_]:
-    """(N,) whether someone of ``others`` (M, 2) stands in front of each floor point (N, 2), seen
-    from a camera standing on ``camera_xy`` (2,): nearer to it, and within ``BODY_RADIUS_M`` of the
-    line of sight. In a crowd, a person behind another is missed by that camera's detector, so its
-    frames are no chance to see them (a camera 1 m up sees nothing of them; one 2.2 m up, their
-    head at most). A point in ``others`` that is the point itself (closer than 1 mm) hides nothing.
-    """
-    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-    o = np.asarray(others, dtype=np.float64).reshape(-1, 2)
-    if not len(xy) or not len(o):
-        return np.zeros(len(xy), dtype=bool)
-    d = xy - np.asarray(camera_xy, dtype=np.float64)[None, :]  # (N, 2) lines of sight
-    q = o[None, :, :] - np.asarray(camera_xy, dtype=np.float64)[None, None, :]  # (1, M, 2)
-    dd = np.maximum((d**2).sum(axis=1), 1e-12)[:, None]  # (N, 1)
-    s = (q * d[:, None, :]).sum(axis=2) / dd  # (N, M) where along each line of sight the other stands
-    across = np.abs(q[..., 0] * d[:, None, 1] - q[..., 1] * d[:, None, 0]) / np.sqrt(dd)  # (N, M)
-    itself = np.linalg.norm(o[None, :, :] - xy[:, None, :], axis=2) < 1e-3
-    return np.asarray(((s > 0) & (s < 1) & (across < BODY_RADIUS_M) & ~itself).any(axis=1), dtype=bool)
 
 
 def corroborated(tr: Track, min_support: float) -> bool:

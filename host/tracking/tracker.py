@@ -39,7 +39,7 @@ from superbody.edge.messages.observation import Observation, PersonView
 from superbody.edge.site import Site
 from superbody.host.tracking.association import Match, associate
 from superbody.host.tracking.config import TrackerConfig
-from superbody.host.tracking.evidence import clearly_sees, hidden_behind, set_s_of_one_body
+from superbody.host.tracking.evidence import clearly_sees, set_s_of_one_body
 from superbody.host.tracking.lifecycle import Lifecycle, Newcomer
 from superbody.host.tracking.measure import FrameViews, measure
 from superbody.host.tracking.motion import NS_PER_S, fuse_positions
@@ -144,16 +144,11 @@ class Tracker:
         return fused
 
     def _count_chances(self, camera: str, tracks: list[Track], cols: NDArray) -> None:
-        """Each placed candidate's chance to be seen in this frame (a camera that clearly sees where it
-        stands, no person in front of it: candidates, maybe a detector's false positives, hide
-        nobody), and whether it was (``host.tracking.evidence``)."""
+        """Each placed candidate's chance to be seen in this frame, and whether it was (``host.tracking.evidence``)."""
         idx = [j for j, tr in enumerate(tracks) if tr.state == "candidate" and tr.motion is not None]
         if not idx:
             return
-        cam = self._cameras[camera]
-        xy = np.array([tracks[j].position for j in idx])
-        others = np.array([tr.position for tr in tracks if tr.state == "confirmed" and tr.motion is not None]).reshape(-1, 2)
-        seen = clearly_sees(cam, xy, self.site.obstacles) & ~hidden_behind(cam.t[:2], xy, others)
+        seen = clearly_sees(self._cameras[camera], np.array([tracks[j].position for j in idx]), self.site.obstacles)
         matched = set(cols.tolist())
         for j, s in zip(idx, seen, strict=True):
             tracks[j].count_chance(hit=j in matched, seen=bool(s))

@@ -9,7 +9,7 @@ import pytest
 from superbody.edge.body import NUM_KEYPOINTS
 from superbody.edge.messages.observation import Observation
 from superbody.host.tracking.config import TrackerConfig
-from superbody.host.tracking.evidence import BODY_RADIUS_M, EDGE_MARGIN, MERGE_AFTER_S, clearly_sees, coincident, hidden_behind, too_close
+from superbody.host.tracking.evidence import EDGE_MARGIN, MERGE_AFTER_S, clearly_sees, coincident, too_close
 from superbody.host.tracking.track import Track
 from superbody.host.tracking.tracker import Tracker
 from tests.host.tracking.test_tracker import C1, C2, C3, CAMS, SITE, T0, S, frame, make_camera, schedule
@@ -36,34 +36,6 @@ def test_an_obstacle_between_camera_and_person_hides_them():
     assert clearly_sees(C1, pts, (shelf,)).tolist() == [False, True]
     low = Obstacle("table", (2.0, 2.0, 0.0), (2.6, 2.6, 0.5))  # below the line of sight to the torso
     assert clearly_sees(C1, pts, (low,)).tolist() == [True, True]
-
-
-def test_somebody_in_front_hides_a_point_only_across_their_width_and_only_in_front():
-    cam = np.array([0.0, 0.0])
-    spots = np.array([[4.0, 0.0], [4.0, 0.0], [4.0, 0.0], [4.0, 0.0], [4.0, 0.0]])
-    for other, hidden in [((2.0, 0.1), True), ((2.0, BODY_RADIUS_M + 0.05), False), ((5.0, 0.0), False),
-                          ((-1.0, 0.0), False), ((4.0, 0.0), False)]:  # in front; beside; behind; behind the camera; itself
-        assert hidden_behind(cam, spots[:1], np.array([other])).tolist() == [hidden], other
-    assert hidden_behind(cam, spots, np.zeros((0, 2))).tolist() == [False] * 5
-    assert hidden_behind(cam, np.zeros((0, 2)), np.array([[1.0, 0.0]])).shape == (0,)
-
-
-def test_a_person_hidden_behind_others_from_two_of_three_cameras_is_still_confirmed():
-    """Scene k, seed 40 (12 s): in a crowd, a person stood behind others from two of the five
-    cameras, which missed them. Those cameras' frames counted as chances to see them, so the
-    person, matched in under half of their chances, went unconfirmed for 5 s. A camera with
-    somebody standing in its line of sight to a candidate gives no chance now."""
-    tracker = Tracker(SITE)
-    p, r, q = (0.0, 0.0, 0.0, 20.0), (2.25, 2.75, 0.0, 80.0), (0.0, 1.0, 0.0, 140.0)
-    # From C3 (0, -4.5) p stands in front of q; from C1 (4.5, 4.5), r does. C2 sees everyone.
-    for k, (cam, t) in enumerate(schedule(2.5)):
-        tracker.update(frame(cam, t, {"p": p, "r": r}, seed=k)[0])
-    assert len(tracker.people(T0 + int(2.5 * S))) == 2
-    for k, (cam, t) in enumerate(schedule(2.6)):
-        t += int(2.5 * S)
-        tracker.update(frame(cam, t, {"p": p, "r": r, "q": q} if cam is C2 else {"p": p, "r": r}, seed=100 + k)[0])
-    (newcomer,) = [tr for tr in tracker.tracks if np.linalg.norm(tr.position - (0.0, 1.0)) < 0.3]
-    assert newcomer.state == "confirmed"
 
 
 def test_too_close():
