@@ -52,25 +52,18 @@ class Match:
     ground_distance_m: float = math.nan
 
 
-def assign(cost: NDArray, feasible: NDArray, first: NDArray | None = None) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+def assign(cost: NDArray, feasible: NDArray) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
     """Joint assignment of rows to columns: the most feasible pairs, then the least total cost.
 
     Args:
         cost: (N, M) cost of each pair.
         feasible: (N, M) bool, False for pairs that must not be matched.
-        first: (M,) bool: these columns are assigned first, the others then take the rows left.
 
     Returns:
         ``(rows, cols)``: matched index pairs, each (K,), all feasible.
     """
     cost = np.asarray(cost, dtype=np.float64)
     feasible = np.asarray(feasible, dtype=bool)
-    if first is not None:
-        a, b = np.flatnonzero(first), np.flatnonzero(~np.asarray(first, dtype=bool))
-        rows, cols = assign(cost[:, a], feasible[:, a])
-        left = np.setdiff1d(np.arange(len(cost)), rows)
-        r2, c2 = assign(cost[np.ix_(left, b)], feasible[np.ix_(left, b)])
-        return np.concatenate([rows, left[r2]]).astype(np.intp), np.concatenate([a[cols], b[c2]]).astype(np.intp)
     if cost.size == 0 or not feasible.any():
         return np.empty(0, dtype=np.intp), np.empty(0, dtype=np.intp)
     # Any forbidden pair costs more than all feasible pairs together, so the solver first
@@ -150,8 +143,10 @@ def associate(t: int, tracks: list[Track], views: FrameViews, cfg: TrackerConfig
     as set S is tested: ``evidence.sigmas_from``), a cue that cannot be computed costing
     ``_UNKNOWN_COST``, and ``UNCORROBORATED_COST`` for a candidate its cameras do not corroborate.
     A pair is feasible only if a cue vouches for it: colours that point to that track
-    (``clearly_best``) or a ground point surer than ``gate_m``. Confirmed people are assigned first;
-    candidates then take the views left (``assign``).
+    (``clearly_best``) or a ground point surer than ``gate_m``. All tracks, people and candidates,
+    are assigned at once (``assign``): the one-body test keeps a person whose own view is missing
+    from taking a neighbour's (matching confirmed people first did that before it, and made them
+    take a candidate's view 1 m away instead).
 
     Args:
         views: the frame's views (``host.tracking.measure``).
@@ -201,5 +196,5 @@ def associate(t: int, tracks: list[Track], views: FrameViews, cfg: TrackerConfig
             cost += cfg.geometry_weight * np.where(geo_known, geo_d / radius, _UNKNOWN_COST)
         vouched = clearly_best(colour_d, REID_MARGIN) | (geo_known & (sigma < cfg.gate_m)[:, None])
     cost += UNCORROBORATED_COST * np.array([not tr.corroborated(cfg.confirm_min_support) for tr in tracks])[None, :]
-    rows, cols = assign(cost, feasible & vouched, first=np.array([tr.state == "confirmed" for tr in tracks], dtype=bool))
+    rows, cols = assign(cost, feasible & vouched)
     return rows, cols, colour_d, geo_d, near
