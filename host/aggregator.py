@@ -273,9 +273,7 @@ class Aggregator:
             # The estimator's own sigma is the measurement noise: a poor single-view yaw moves a track less.
             update_many(filters, measured, est.pose[rows], est.std[rows])
             fps = predict_many(filters, stamps)
-            # The tracker's positions follow its views alone: fed these estimates back, its gate
-            # followed an estimate's errors (a 0.34 m one, taken up by this filter, ran 1 m ahead of
-            # a person standing still) and refused the person's own views (docs/scenes.md).
+            self.tracker.set_positions(tids, [(fp.x, fp.y) for fp in fps], stamps)
             self._watch_calibration(tids, sets, stamps_of, newest, fps)
             conf = confidences([sets[tid] for tid in tids]).tolist() if tids else []
             for i, tid, fp, c in zip(rows, tids, fps, conf):

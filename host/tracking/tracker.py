@@ -30,9 +30,10 @@ body (``evidence.one_body``), for the estimator.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from superbody.edge.messages.observation import Observation, PersonView
 from superbody.edge.site import Site
@@ -49,7 +50,7 @@ __all__ = ["Tracker"]
 _STATS = (
     "observations", "views", "wrong_site", "unknown_camera", "too_few_joints", "track_cap", "evicted_candidates", "too_few_joints_new",
     "no_ground_point", "no_signature", "unplaced_new", "suppressed", "duplicate_views", "matched", "new_candidates", "confirmed", "removed",
-    "dropped_candidates", "reidentified", "merged", "views_of_another_body",
+    "dropped_candidates", "reidentified", "merged", "views_of_another_body", "feedback_refused",
 )
 
 
@@ -171,6 +172,43 @@ class Tracker:
         if fused:
             rs = np.array([r for _, r in fused])
             fuse_positions([tr for tr, _ in fused], views.ground[rs], views.sigma[rs], t, self.config.accel_std_mps2)
+
+    def set_position(self, track_id: int, xy: NDArray | tuple[float, float], stamp_ns: int, std_m: float = 0.1) -> bool:
+        """Feed back a better position (e.g. the GNN's) for a track, as a measurement of 1-sigma ``std_m``.
+
+        Returns:
+            False if no such track (it may just have been removed), or the point is refused (``set_positions``).
+        """
+        return bool(self.set_positions([track_id], np.asarray(xy, dtype=np.float64).reshape(1, 2), [stamp_ns], std_m)[0])
+
+    def set_positions(self, track_ids: Sequence[int], xy: ArrayLike, stamps_ns: Sequence[int], std_m: float = 0.1) -> NDArray[np.bool_]:
+        """Feed back better positions for many tracks at once (one Kalman batch): ids (B,), xy (B, 2), stamps (B,).
+
+        A point is refused where one body could not stand (more than ``same_body_sigmas`` combined
+        1-sigmas from the track's prediction, counted in ``feedback_refused``), as a view is: an
+        estimate from a set S gone wrong, taken up by the host's pose filter, ran on ahead of the
+        person (1 m in 0.4 s, scene k, seed 13), and the track's gate then refused the person's
+        own views.
+
+        Returns:
+            (B,) bool, False where there is no such track, the point is not finite, or it was refused.
+        """
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        if not (std_m > 0 and math.isfinite(std_m)):
+            return np.zeros(len(xy), dtype=bool)
+        tracks = [self._life.tracks.get(int(i)) for i in track_ids]
+        ok = np.array([tr is not None for tr in tracks], dtype=bool) & np.isfinite(xy).all(axis=1)
+        sigmas, stamps = self.config.same_body_sigmas, np.asarray(stamps_ns, dtype=np.int64)
+        for j in np.flatnonzero(ok) if sigmas > 0 else ():  # where one body could stand, as views are matched
+            pred = tracks[j].predict_position(int(stamps[j]), self.config.accel_std_mps2)  # type: ignore[union-attr]
+            if pred is not None and np.hypot(*(xy[j] - pred[0])) > sigmas * math.hypot(pred[1], std_m):
+                ok[j] = False
+                self.stats["feedback_refused"] += 1
+        if ok.any():
+            idx = np.flatnonzero(ok)
+            fuse_positions([tracks[i] for i in idx], xy[idx], np.full(len(idx), float(std_m)),  # type: ignore[misc]
+                            stamps[idx], self.config.accel_std_mps2)
+        return ok
 
     def prune(self, now_ns: int) -> list[Track]:
         """Remove tracks unseen for ``remove_after_s``, and the younger of two confirmed tracks that
