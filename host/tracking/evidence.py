@@ -52,7 +52,7 @@ from superbody.edge.site import Obstacle
 from superbody.host.tracking.motion import NS_PER_S
 from superbody.host.tracking.track import StampedView, Track
 
-__all__ = ["EDGE_MARGIN", "MERGE_AFTER_S", "TORSO_CENTRE_M", "UNCORROBORATED_COST", "clearly_sees", "corroborated", "too_close", "coincident", "seen_together", "one_body", "set_s_of_one_body", "sigmas_from"]
+__all__ = ["EDGE_MARGIN", "MERGE_AFTER_S", "TORSO_CENTRE_M", "UNCORROBORATED_COST", "clearly_sees", "corroborated", "too_close", "coincident", "seen_together", "one_body", "set_s_of_one_body", "sigmas_from", "view_covariance"]
 
 TORSO_CENTRE_M = 1.15  # height of a standing adult's torso centre (between hips 0.9 m and shoulders 1.4 m)
 EDGE_MARGIN = 0.1  # fraction of the image's width and height left out on each side
@@ -150,15 +150,8 @@ def one_body(views: dict[str, StampedView], near_xy: NDArray | None, sigmas: flo
     placed = np.isfinite(xy).all(axis=1) & (std > 0) & np.isfinite(std)  # (V,)
     if placed.sum() < 2:
         return cams
-    # Each view's covariance [[a, b], [b, c]]: std^2 along its line of sight u, across^2 across it.
-    u = xy - np.array([v.camera_xy for v in sv], dtype=np.float64)  # (V, 2)
-    norm = np.hypot(u[:, 0], u[:, 1])
-    aimed = norm > 0  # False for NaN: no camera point, unsure alike in every direction
+    a, b, c = view_covariance(xy, std, np.array([v.camera_xy for v in sv], dtype=np.float64), across_m)
     with np.errstate(all="ignore"):  # rows of views not placed are NaN, and never used
-        u = np.where(aimed[:, None], u / np.where(aimed, norm, 1.0)[:, None], 0.0)
-        across2 = np.where(aimed, np.minimum(across_m, std), std) ** 2
-        extra = std**2 - across2  # along minus across
-        a, b, c = across2 + extra * u[:, 0] ** 2, extra * u[:, 0] * u[:, 1], across2 + extra * u[:, 1] ** 2
         det = a * c - b * b
         ia, ib, ic = c / det, -b / det, a / det  # the inverse: each view's information
         bx, by = ia * xy[:, 0] + ib * xy[:, 1], ib * xy[:, 0] + ic * xy[:, 1]  # information times point
@@ -184,28 +177,36 @@ def one_body(views: dict[str, StampedView], near_xy: NDArray | None, sigmas: flo
     return [cam for cam, kept, p in zip(cams, keep, placed, strict=True) if kept or not p]
 
 
+def view_covariance(xy: NDArray, std: NDArray, camera_xy: NDArray, across_m: float) -> tuple[NDArray, NDArray, NDArray]:
+    """Each ground point's covariance ``[[a, b], [b, c]]`` (three (V,) arrays): ``std`` (V,) along its
+    camera's line of sight (from ``camera_xy``, (V, 2) or (2,)), ``across_m`` across it (capped at
+    ``std``). A point without a camera point (NaN) is unsure alike in every direction; NaN rows
+    (no ground point) stay NaN."""
+    u = xy - camera_xy  # (V, 2) lines of sight
+    norm = np.hypot(u[:, 0], u[:, 1])
+    aimed = norm > 0
+    with np.errstate(all="ignore"):
+        u = np.where(aimed[:, None], u / np.where(aimed, norm, 1.0)[:, None], 0.0)
+        across2 = np.where(aimed, np.minimum(across_m, std), std) ** 2
+        extra = std**2 - across2  # along minus across
+        return across2 + extra * u[:, 0] ** 2, extra * u[:, 0] * u[:, 1], across2 + extra * u[:, 1] ** 2
+
+
 def sigmas_from(ground: NDArray, std: NDArray, camera_xy: NDArray, xy: NDArray, var: NDArray, across_m: float) -> NDArray[np.float64]:
     """(K, M) how many combined 1-sigmas each of one camera's K ground points lies from each of M
-    predicted positions: the views' error as in ``one_body`` (``std`` (K,) along the camera's line of
-    sight, ``across_m`` across it, capped at ``std``) plus each prediction's (``var`` (M,), the same
-    in every direction). NaN where a point or a prediction is unknown.
+    predicted positions: the views' error as in ``one_body`` (``view_covariance``) plus each
+    prediction's (``var`` (M,), the same in every direction). NaN where a point or a prediction is
+    unknown.
 
     Args:
         ground: (K, 2) ground points; std: (K,) their 1-sigma; camera_xy: (2,) the camera's floor point.
         xy: (M, 2) predicted positions; var: (M,) their variance, m^2.
     """
-    u = ground - np.asarray(camera_xy, dtype=np.float64)[None, :]  # (K, 2) line of sight
-    norm = np.hypot(u[:, 0], u[:, 1])
-    with np.errstate(all="ignore"):  # NaN rows (no ground point) stay NaN
-        u = np.where((norm > 0)[:, None], u / np.where(norm > 0, norm, 1.0)[:, None], 0.0)
-        across2 = np.minimum(across_m, std) ** 2  # (K,)
-        extra = std**2 - across2
-        a = across2[:, None] + extra[:, None] * u[:, 0, None] ** 2 + var[None, :]  # (K, M) covariance [[a, b], [b, c]]
-        b = np.broadcast_to((extra * u[:, 0] * u[:, 1])[:, None], a.shape)
-        c = across2[:, None] + extra[:, None] * u[:, 1, None] ** 2 + var[None, :]
-        g = ground[:, None, :] - xy[None, :, :]  # (K, M, 2)
-        d2 = (c * g[..., 0] ** 2 - 2 * b * g[..., 0] * g[..., 1] + a * g[..., 1] ** 2) / (a * c - b * b)
-    return np.sqrt(d2)
+    a, b, c = view_covariance(ground, std, np.asarray(camera_xy, dtype=np.float64), across_m)  # (K,)
+    a, b, c = a[:, None] + var[None, :], b[:, None], c[:, None] + var[None, :]  # (K, M) with the prediction's
+    g = ground[:, None, :] - xy[None, :, :]  # (K, M, 2)
+    with np.errstate(all="ignore"):
+        return np.sqrt((c * g[..., 0] ** 2 - 2 * b * g[..., 0] * g[..., 1] + a * g[..., 1] ** 2) / (a * c - b * b))
 
 
 def set_s_of_one_body(tr: Track, fresh: dict[str, StampedView], sigmas: float, across_m: float) -> tuple[list[str], int]:

@@ -42,7 +42,7 @@ from superbody.host.tracking.config import TrackerConfig
 from superbody.host.tracking.evidence import clearly_sees, set_s_of_one_body
 from superbody.host.tracking.lifecycle import Lifecycle, Newcomer
 from superbody.host.tracking.measure import FrameViews, measure
-from superbody.host.tracking.motion import NS_PER_S, fuse_positions
+from superbody.host.tracking.motion import NS_PER_S, fuse_positions, predict_positions
 from superbody.host.tracking.track import StampedView, Track
 
 __all__ = ["Tracker"]
@@ -199,11 +199,15 @@ class Tracker:
         tracks = [self._life.tracks.get(int(i)) for i in track_ids]
         ok = np.array([tr is not None for tr in tracks], dtype=bool) & np.isfinite(xy).all(axis=1)
         sigmas, stamps = self.config.same_body_sigmas, np.asarray(stamps_ns, dtype=np.int64)
-        for j in np.flatnonzero(ok) if sigmas > 0 else ():  # where one body could stand, as views are matched
-            pred = tracks[j].predict_position(int(stamps[j]), self.config.accel_std_mps2)  # type: ignore[union-attr]
-            if pred is not None and np.hypot(*(xy[j] - pred[0])) > sigmas * math.hypot(pred[1], std_m):
-                ok[j] = False
-                self.stats["feedback_refused"] += 1
+        placed = [j for j in np.flatnonzero(ok) if tracks[j].motion is not None] if sigmas > 0 else []  # type: ignore[union-attr]
+        if placed:  # where one body could stand, as views are matched: one batch of predictions
+            states = [tracks[j].motion for j in placed]  # type: ignore[union-attr]
+            x, P = predict_positions(np.array([m[0] for m in states]), np.array([m[1] for m in states]),  # type: ignore[index]
+                                     (stamps[placed] - np.array([m[2] for m in states])) / NS_PER_S,  # type: ignore[index]
+                                     self.config.accel_std_mps2)
+            far = np.hypot(*(xy[placed] - x[:, 0]).T) > sigmas * np.sqrt(P[:, 0, 0] + std_m**2)
+            ok[np.array(placed)[far]] = False
+            self.stats["feedback_refused"] += int(far.sum())
         if ok.any():
             idx = np.flatnonzero(ok)
             fuse_positions([tracks[i] for i in idx], xy[idx], np.full(len(idx), float(std_m)),  # type: ignore[misc]
