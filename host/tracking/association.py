@@ -1,5 +1,6 @@
-"""Matching views to tracks: joint assignment on a cost matrix and the colour distance between a
-view's histogram and a track's history (median Bhattacharyya distance, the paper's rule)."""
+"""Matching views to tracks: joint assignment on a cost matrix (a negative log likelihood of each
+view under each track: ``associate``) and the colour distance between a view's histogram and a
+track's history (median Bhattacharyya distance, the paper's rule)."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from scipy.optimize import linear_sum_assignment
 
 from superbody.edge.colour import bhattacharyya_matrix
 from superbody.host.tracking.config import TrackerConfig
-from superbody.host.tracking.evidence import UNCORROBORATED_COST, sigmas_from
+from superbody.host.tracking.evidence import sigmas_from
 from superbody.host.tracking.motion import NS_PER_S, predict_positions
 from superbody.host.tracking.reid import REID_MARGIN
 from superbody.host.tracking.track import BINS, Track
@@ -23,8 +24,11 @@ if TYPE_CHECKING:
 
 __all__ = ["Match", "associate", "assign", "amplitudes", "clearly_best", "median_colour_distance", "median_over_history"]
 
-# A cue we cannot compute (empty histogram, no ground point) costs this much, normalised.
-_UNKNOWN_COST = 0.5
+# An empty histogram costs this much (colour costs are distances over d_max: feasible below 1).
+_UNKNOWN_COLOUR_COST = 0.5
+# A view or a track without a place costs what a true match's place costs on average: half the
+# expected squared sigmas of a 2-D Gaussian, and no spread.
+_UNKNOWN_PLACE_COST = 1.0
 
 
 @dataclass(frozen=True)
@@ -136,17 +140,32 @@ def median_colour_distance(hists: NDArray, history: NDArray, counts: NDArray) ->
 def associate(t: int, tracks: list[Track], views: FrameViews, cfg: TrackerConfig) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
     """Cost, feasibility and joint assignment of a frame's K views to M tracks at time ``t``.
 
-    The cost: the colour distance over ``d_max`` (the paper's rule: feasible below it) plus, with
-    ``use_geometry``, ``geometry_weight`` times the ground distance over the gate (feasible within
-    ``gate_m`` plus the view's and the prediction's sigma, and where one body could stand: within
-    ``same_body_sigmas`` of the prediction, the view's error sure across its camera's line of sight,
-    as set S is tested: ``evidence.sigmas_from``), a cue that cannot be computed costing
-    ``_UNKNOWN_COST``, and ``UNCORROBORATED_COST`` for a candidate its cameras do not corroborate.
-    A pair is feasible only if a cue vouches for it: colours that point to that track
-    (``clearly_best``) or a ground point surer than ``gate_m``. All tracks, people and candidates,
-    are assigned at once (``assign``): the one-body test keeps a person whose own view is missing
-    from taking a neighbour's (matching confirmed people first did that before it, and made them
-    take a candidate's view 1 m away instead).
+    The cost of a pair, in units of a negative log likelihood, is the sum of three terms:
+
+    - colour: the colour distance over ``d_max`` (the paper's rule: feasible below it);
+      ``_UNKNOWN_COLOUR_COST`` for an empty histogram;
+    - place (with ``use_geometry``): ``geometry_weight`` times ``s^2 / 2 + log(det C / det V) / 2``,
+      ``s`` the combined sigmas between the view's ground point and the track's prediction
+      (``evidence.sigmas_from``: the view sure across its camera's line of sight and unsure along
+      it, the prediction's sigma added), C that combined covariance and V the view's own. The
+      second part is how much a prediction's vagueness spreads its chance over the floor: a vague
+      track explains any one view less well, where a distance over a gate that widens with the
+      track's sigma made it the cheaper match (a candidate born beside a person from a detector's
+      second skeleton took the person's next views; scene k, seed 23). ``_UNKNOWN_PLACE_COST``
+      where either has no place;
+    - detection: minus the log of the share of its chances the track was reported in since its
+      steady matches began (``Track.support``; a person: 0), as a detection probability weighs a
+      likelihood: a candidate that the cameras which clearly see its spot do not report (built
+      from a detector's false positives) pays for every view it takes (scene l, seed 19: such a
+      candidate beside a person who stopped at once took their views, while the person's
+      prediction ran on).
+
+    Feasible: the colour distance below ``d_max`` where known; with ``use_geometry``, the ground
+    point within ``gate_m`` plus the view's and the prediction's sigma of the prediction, and where
+    one body could stand, within ``same_body_sigmas`` of it (set S's test). A pair is feasible only
+    if a cue vouches for it: colours that point to that track (``clearly_best``) or a ground point
+    surer than ``gate_m``. All tracks, people and candidates, are assigned at once (``assign``):
+    the one-body test keeps a person whose own view is missing from taking a neighbour's.
 
     Args:
         views: the frame's views (``host.tracking.measure``).
@@ -173,7 +192,7 @@ def associate(t: int, tracks: list[Track], views: FrameViews, cfg: TrackerConfig
     colour_known = ~np.isnan(colour_d)
     with np.errstate(invalid="ignore"):
         feasible = ~colour_known | (colour_d < cfg.d_max)  # (K, M)
-    cost = np.where(colour_known, colour_d / cfg.d_max, _UNKNOWN_COST)
+    cost = np.where(colour_known, colour_d / cfg.d_max, _UNKNOWN_COLOUR_COST)
     vouched = colour_known
     if cfg.use_geometry:
         states = [tr.motion for tr in tracks]
@@ -190,11 +209,12 @@ def associate(t: int, tracks: list[Track], views: FrameViews, cfg: TrackerConfig
         with np.errstate(invalid="ignore"):
             near = geo_known & (geo_d <= radius)
             body = near
+            sig, spread = sigmas_from(ground, sigma, views.camera_xy, pos, pos_std**2, cfg.same_body_across_m, spread=True)
             if cfg.same_body_sigmas > 0:  # and where one body could stand: the set S test, per view
-                body = near & (sigmas_from(ground, sigma, views.camera_xy, pos, pos_std**2, cfg.same_body_across_m) <= cfg.same_body_sigmas)
+                body = near & (sig <= cfg.same_body_sigmas)
             feasible &= ~geo_known | body
-            cost += cfg.geometry_weight * np.where(geo_known, geo_d / radius, _UNKNOWN_COST)
+            cost += cfg.geometry_weight * np.where(geo_known, 0.5 * sig**2 + spread, _UNKNOWN_PLACE_COST)
         vouched = clearly_best(colour_d, REID_MARGIN) | (geo_known & (sigma < cfg.gate_m)[:, None])
-    cost += UNCORROBORATED_COST * np.array([not tr.corroborated(cfg.confirm_min_support) for tr in tracks])[None, :]
+    cost -= np.log(np.array([tr.support for tr in tracks]))[None, :]
     rows, cols = assign(cost, feasible & vouched)
     return rows, cols, colour_d, geo_d, near

@@ -41,8 +41,9 @@ class TrackerConfig:
             and a candidate started from them is usually a duplicate of someone.
         confirm_max_gap_s: a candidate unseen longer than this restarts its confirmation clock,
             so "2 s of matches" means 2 s of steady matches.
-        geometry_weight: weight of the normalised ground distance against the normalised
-            colour distance in the assignment cost.
+        geometry_weight: weight of the place term of the assignment cost (a negative log
+            likelihood: ``association.associate``) against the colour term (a colour distance
+            over ``d_max``); 0 matches on colour alone within the gates.
         accel_std_mps2: 1-sigma acceleration of a walking person, for the position prediction.
         max_tracks: at most this many tracks, candidates included (see the module docstring
             for the policy when full); at most ``host.messages.pose.MAX_PEOPLE`` so every PoseArray

@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Literal, overload
 
 import numpy as np
 from numpy.typing import NDArray
@@ -52,19 +53,11 @@ from superbody.edge.site import Obstacle
 from superbody.host.tracking.motion import NS_PER_S
 from superbody.host.tracking.track import StampedView, Track
 
-__all__ = ["EDGE_MARGIN", "MERGE_AFTER_S", "TORSO_CENTRE_M", "UNCORROBORATED_COST", "clearly_sees", "corroborated", "too_close", "coincident", "seen_together", "one_body", "set_s_of_one_body", "sigmas_from", "view_covariance"]
+__all__ = ["EDGE_MARGIN", "MERGE_AFTER_S", "TORSO_CENTRE_M", "clearly_sees", "corroborated", "too_close", "coincident", "seen_together", "one_body", "set_s_of_one_body", "sigmas_from", "view_covariance"]
 
 TORSO_CENTRE_M = 1.15  # height of a standing adult's torso centre (between hips 0.9 m and shoulders 1.4 m)
 EDGE_MARGIN = 0.1  # fraction of the image's width and height left out on each side
 MERGE_AFTER_S = 0.5  # how long two confirmed tracks may stand inside each other before they are one
-# Matching a view to a candidate its cameras do not corroborate costs this much more (normalised
-# like a ground distance over its gate). A track's gate widens with its uncertainty, so a vague
-# candidate (a detector's false positives it was built from, its prediction drifting) was the
-# cheaper match: its prediction wandered onto a person and took their views from the candidate
-# their cameras corroborated, which starved. A view goes to it now only if it lies 0.3 of a gate
-# nearer. Ranking candidates strictly by evidence did worse (a corroborated candidate then took a
-# neighbour's view left to an uncorroborated one).
-UNCORROBORATED_COST = 0.3
 
 
 def clearly_sees(cam: Camera, xy: NDArray, obstacles: Sequence[Obstacle] = ()) -> NDArray[np.bool_]:
@@ -192,7 +185,14 @@ def view_covariance(xy: NDArray, std: NDArray, camera_xy: NDArray, across_m: flo
         return across2 + extra * u[:, 0] ** 2, extra * u[:, 0] * u[:, 1], across2 + extra * u[:, 1] ** 2
 
 
-def sigmas_from(ground: NDArray, std: NDArray, camera_xy: NDArray, xy: NDArray, var: NDArray, across_m: float) -> NDArray[np.float64]:
+@overload
+def sigmas_from(ground: NDArray, std: NDArray, camera_xy: NDArray, xy: NDArray, var: NDArray, across_m: float,
+                spread: Literal[False] = ...) -> NDArray[np.float64]: ...
+@overload
+def sigmas_from(ground: NDArray, std: NDArray, camera_xy: NDArray, xy: NDArray, var: NDArray, across_m: float,
+                spread: Literal[True]) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
+def sigmas_from(ground: NDArray, std: NDArray, camera_xy: NDArray, xy: NDArray, var: NDArray, across_m: float,
+                spread: bool = False) -> NDArray[np.float64] | tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(K, M) how many combined 1-sigmas each of one camera's K ground points lies from each of M
     predicted positions: the views' error as in ``one_body`` (``view_covariance``) plus each
     prediction's (``var`` (M,), the same in every direction). NaN where a point or a prediction is
@@ -201,12 +201,20 @@ def sigmas_from(ground: NDArray, std: NDArray, camera_xy: NDArray, xy: NDArray, 
     Args:
         ground: (K, 2) ground points; std: (K,) their 1-sigma; camera_xy: (2,) the camera's floor point.
         xy: (M, 2) predicted positions; var: (M,) their variance, m^2.
+        spread: also return (K, M) ``0.5 log(det C / det V)``, C the combined covariance and V the
+            view's own: how much a prediction's vagueness spreads the chance of a view over the
+            floor (0 for a sure prediction). Half the squared sigmas plus it is the negative log
+            likelihood of the view given the prediction, less a term of the view alone.
     """
-    a, b, c = view_covariance(ground, std, np.asarray(camera_xy, dtype=np.float64), across_m)  # (K,)
-    a, b, c = a[:, None] + var[None, :], b[:, None], c[:, None] + var[None, :]  # (K, M) with the prediction's
+    a0, b0, c0 = view_covariance(ground, std, np.asarray(camera_xy, dtype=np.float64), across_m)  # (K,)
+    a, b, c = a0[:, None] + var[None, :], b0[:, None], c0[:, None] + var[None, :]  # (K, M) with the prediction's
     g = ground[:, None, :] - xy[None, :, :]  # (K, M, 2)
     with np.errstate(all="ignore"):
-        return np.sqrt((c * g[..., 0] ** 2 - 2 * b * g[..., 0] * g[..., 1] + a * g[..., 1] ** 2) / (a * c - b * b))
+        det = a * c - b * b
+        m = np.sqrt((c * g[..., 0] ** 2 - 2 * b * g[..., 0] * g[..., 1] + a * g[..., 1] ** 2) / det)
+        if not spread:
+            return m
+        return m, 0.5 * np.log(det / (a0 * c0 - b0 * b0)[:, None])
 
 
 def set_s_of_one_body(tr: Track, fresh: dict[str, StampedView], sigmas: float, across_m: float) -> tuple[list[str], int]:

@@ -152,6 +152,11 @@ class Track:
         self._chances += int(hit or seen)
         self._support += int(hit)
 
+    @property
+    def support(self) -> float:
+        """The share of its chances it was matched in since its steady matches began (1 for a person)."""
+        return 1.0 if self.state == "confirmed" else self._support / self._chances
+
     def corroborated(self, min_support: float) -> bool:
         """Confirmed, or matched in at least ``min_support`` of its chances since its steady matches began."""
         return self.state == "confirmed" or self._support >= min_support * self._chances

@@ -10,10 +10,10 @@ each a module of its own:
    (a detector's double report, a flood of copies: one view), their ground points
    (``host.tracking.ground``) and colours;
 2. associate (``host.tracking.association``): all the frame's views with the tracks at once
-   (``scipy.optimize.linear_sum_assignment``) on colour plus the normalised distance of the
-   view's ground point to the track's predicted position (``host.tracking.motion``: a
-   constant-velocity Kalman filter per track), gated where one body could stand, a cue
-   vouching for each pair;
+   (``scipy.optimize.linear_sum_assignment``) on colour plus the negative log likelihood of the
+   view's ground point under the track's predicted position (``host.tracking.motion``: a
+   constant-velocity Kalman filter per track) and of the track being reported at all, gated
+   where one body could stand, a cue vouching for each pair;
 3. evidence (``host.tracking.evidence``): each candidate's chance to be seen by this camera, and
    whether it was;
 4. record the matched views, and start candidates from the rest (``host.tracking.lifecycle``:

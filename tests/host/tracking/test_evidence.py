@@ -334,10 +334,11 @@ def test_a_candidate_its_cameras_corroborate_picks_its_persons_views_before_a_va
     """Scene l, seed 30 (12 s): a candidate built from a detector's random partial views, which
     its cameras never corroborated, had wandered 2 m across the room on them, and its vague
     prediction landed on a person whose own candidate stood there, corroborated by every camera.
-    A vague track is the cheaper match (its gate is wider): the wanderer took the person's views,
-    the person's candidate starved, and the person went unconfirmed for 3 s. A candidate its
-    cameras do not corroborate now pays for each view (``UNCORROBORATED_COST``); a view clearly
-    nearer to it is still its own."""
+    A vague track was the cheaper match (its gate is wider): the wanderer took the person's views,
+    the person's candidate starved, and the person went unconfirmed for 3 s. A view now costs its
+    negative log likelihood under each track, a vague prediction's spread and a rarely reported
+    track's detection share included (``association.associate``); a view clearly nearer to the
+    wanderer is still its own."""
     from superbody.edge.messages.observation import empty_histogram
     from tests.host.tracking.test_tracker import person_view
 
@@ -421,3 +422,69 @@ def test_one_body_keeps_views_without_a_usable_ground_point_and_warns_of_nothing
         # along a's and e's, which are sure of it): another body.
         views["d"] = views["d"]._replace(camera_xy=(-3.0, 0.4))
         assert one_body(views, np.zeros(2), 3.0, 0.08) == ["a", "b", "c", "e", "f"]
+
+
+def test_a_view_within_a_persons_range_error_goes_to_them_not_to_a_candidate_born_a_frame_ago():
+    """Scene k, seed 23 (12 s), without the host's feedback: a detector's second skeleton of a
+    walking person started a candidate beside them, and the person's next views went to it: its
+    prediction, made from one point, was the vaguer, and a ground distance over the gate made a
+    vague track the cheaper match. The person's track, starved, ran on alone and the person came
+    back under the candidate's id. A view now costs its negative log likelihood under each
+    prediction: the person's sure prediction explains a view 0.1 m off along the camera's line of
+    sight (its range error) better than the candidate's vague one explains a view on its spot."""
+    from superbody.edge.messages.observation import empty_histogram
+    from superbody.host.tracking.motion import INIT_SPEED_STD
+    from tests.host.tracking.test_tracker import person_view
+
+    tracker = Tracker(SITE)
+
+    def obs(cam, t, spots):
+        views = [person_view(cam, x, y, 0.0, empty_histogram()) for x, y in spots]
+        return Observation(SITE.name, cam.id, t // 1_000_000, t, cam.width, cam.height, tuple(v for v in views if v is not None))
+
+    for cam, t in schedule(2.5):  # p, confirmed
+        tracker.update(obs(cam, t, [(0.0, 0.0)]))
+    (p,) = tracker.people(T0 + int(2.5 * S))
+    t = T0 + int(2.5 * S)
+    (_, born) = tracker.update(obs(C1, t, [(0.0, 0.0), (1.5, -1.5)]))  # a candidate, then put beside p:
+    cand = tracker.track(born.track_id)
+    assert born.status == "created" and cand is not None
+    sight = -np.asarray(C1.t[:2]) / np.linalg.norm(C1.t[:2])  # C1's line of sight through p
+    spot = 0.1 * sight
+    # ... as one point makes it: the view's sigma, the speed unknown.
+    cand.set_motion(np.array([spot, [0.0, 0.0]]), np.diag([0.15**2, INIT_SPEED_STD**2]), t)
+    (m,) = tracker.update(obs(C1, t + 30_000_000, [tuple(spot)]))
+    assert m.track_id == p.id
+
+
+def test_a_candidate_its_cameras_do_not_report_pays_for_each_view_by_how_rarely_they_do():
+    """Scene l, seed 19 (12 s): a person walking at 1.1 m/s stopped at once, their track's
+    prediction ran on past them, and a candidate built from a detector's random partial views,
+    reported in 1 of 20 of its chances, stood by the spot: the person's views went to it (the
+    nearer and surer prediction), their track starved and they came back under a new id. A track
+    is matched at a view's cost plus minus the log of the share of its chances it was reported in
+    (a person: 0), as a detection probability weighs a likelihood."""
+    from superbody.edge.messages.observation import empty_histogram
+    from tests.host.tracking.test_tracker import person_view
+
+    tracker = Tracker(SITE)
+
+    def obs(cam, t, spots):
+        views = [person_view(cam, x, y, 0.0, empty_histogram()) for x, y in spots]
+        return Observation(SITE.name, cam.id, t // 1_000_000, t, cam.width, cam.height, tuple(v for v in views if v is not None))
+
+    for cam, t in schedule(2.5):  # p, confirmed
+        tracker.update(obs(cam, t, [(0.0, 0.0)]))
+    (p,) = tracker.people(T0 + int(2.5 * S))
+    t = T0 + int(2.5 * S)
+    (_, born) = tracker.update(obs(C1, t, [(0.0, 0.0), (1.5, -1.5)]))
+    ghost = tracker.track(born.track_id)
+    assert born.status == "created" and ghost is not None
+    across = np.array([-C1.t[1], C1.t[0]]) / np.linalg.norm(C1.t[:2])  # across C1's line of sight through p
+    ghost.set_motion(np.array([0.2 * across, [0.0, 0.0]]), np.diag([0.02**2, 0.05**2]), t)  # sure, beside p
+    ghost.restart_streak(t)
+    for _ in range(19):
+        ghost.count_chance(hit=False, seen=True)  # 1 match in 20 chances
+    assert ghost.support == pytest.approx(1 / 20)
+    (m,) = tracker.update(obs(C1, t + 30_000_000, [tuple(0.15 * across)]))
+    assert m.track_id == p.id
