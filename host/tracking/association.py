@@ -15,7 +15,7 @@ from scipy.optimize import linear_sum_assignment
 from superbody.edge.colour import bhattacharyya_matrix
 from superbody.host.tracking.config import TrackerConfig
 from superbody.host.tracking.evidence import sigmas_from
-from superbody.host.tracking.motion import NS_PER_S, predict_positions
+from superbody.host.tracking.motion import predict_tracks
 from superbody.host.tracking.reid import REID_MARGIN
 from superbody.host.tracking.track import BINS, Track
 
@@ -195,21 +195,15 @@ def associate(t: int, tracks: list[Track], views: FrameViews, cfg: TrackerConfig
     cost = np.where(colour_known, colour_d / cfg.d_max, _UNKNOWN_COLOUR_COST)
     vouched = colour_known
     if cfg.use_geometry:
-        states = [tr.motion for tr in tracks]
-        has_pos = np.array([st is not None for st in states], dtype=bool)  # (M,)
-        pos, pos_std = np.full((m, 2), np.nan), np.full(m, np.nan)
-        if has_pos.any():
-            known = [st for st in states if st is not None]
-            x, P = predict_positions(np.array([st[0] for st in known]), np.array([st[1] for st in known]),
-                                     np.array([(t - st[2]) / NS_PER_S for st in known]), cfg.accel_std_mps2)
-            pos[has_pos], pos_std[has_pos] = x[:, 0, :], np.sqrt(P[:, 0, 0])
+        pos, pos_var = predict_tracks(tracks, t, cfg.accel_std_mps2)  # (M, 2), (M,)
+        has_pos, pos_std = ~np.isnan(pos_var), np.sqrt(pos_var)
         geo_d = np.linalg.norm(ground[:, None, :] - pos[None, :, :], axis=2)  # (K, M)
         radius = cfg.gate_m + np.hypot(sigma[:, None], pos_std[None, :])  # (K, M)
         geo_known = has_ground[:, None] & has_pos[None, :]
         with np.errstate(invalid="ignore"):
             near = geo_known & (geo_d <= radius)
             body = near
-            sig, spread = sigmas_from(ground, sigma, views.camera_xy, pos, pos_std**2, cfg.same_body_across_m, spread=True)
+            sig, spread = sigmas_from(ground, sigma, views.camera_xy, pos, pos_var, cfg.same_body_across_m)
             if cfg.same_body_sigmas > 0:  # and where one body could stand: the set S test, per view
                 body = near & (sig <= cfg.same_body_sigmas)
             feasible &= ~geo_known | body

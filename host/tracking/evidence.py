@@ -42,7 +42,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Literal, overload
 
 import numpy as np
 from numpy.typing import NDArray
@@ -185,14 +184,8 @@ def view_covariance(xy: NDArray, std: NDArray, camera_xy: NDArray, across_m: flo
         return across2 + extra * u[:, 0] ** 2, extra * u[:, 0] * u[:, 1], across2 + extra * u[:, 1] ** 2
 
 
-@overload
-def sigmas_from(ground: NDArray, std: NDArray, camera_xy: NDArray, xy: NDArray, var: NDArray, across_m: float,
-                spread: Literal[False] = ...) -> NDArray[np.float64]: ...
-@overload
-def sigmas_from(ground: NDArray, std: NDArray, camera_xy: NDArray, xy: NDArray, var: NDArray, across_m: float,
-                spread: Literal[True]) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
-def sigmas_from(ground: NDArray, std: NDArray, camera_xy: NDArray, xy: NDArray, var: NDArray, across_m: float,
-                spread: bool = False) -> NDArray[np.float64] | tuple[NDArray[np.float64], NDArray[np.float64]]:
+def sigmas_from(ground: NDArray, std: NDArray, camera_xy: NDArray, xy: NDArray, var: NDArray,
+                across_m: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(K, M) how many combined 1-sigmas each of one camera's K ground points lies from each of M
     predicted positions: the views' error as in ``one_body`` (``view_covariance``) plus each
     prediction's (``var`` (M,), the same in every direction). NaN where a point or a prediction is
@@ -201,10 +194,13 @@ def sigmas_from(ground: NDArray, std: NDArray, camera_xy: NDArray, xy: NDArray, 
     Args:
         ground: (K, 2) ground points; std: (K,) their 1-sigma; camera_xy: (2,) the camera's floor point.
         xy: (M, 2) predicted positions; var: (M,) their variance, m^2.
-        spread: also return (K, M) ``0.5 log(det C / det V)``, C the combined covariance and V the
-            view's own: how much a prediction's vagueness spreads the chance of a view over the
-            floor (0 for a sure prediction). Half the squared sigmas plus it is the negative log
-            likelihood of the view given the prediction, less a term of the view alone.
+
+    Returns:
+        ``(sigmas, spread)``, both (K, M): the sigmas, and ``0.5 log(det C / det V)``, C the
+        combined covariance and V the view's own: how much a prediction's vagueness spreads the
+        chance of a view over the floor (0 for a sure prediction). Half the squared sigmas plus
+        the spread is the negative log likelihood of the view given the prediction, less a term
+        of the view alone.
     """
     a0, b0, c0 = view_covariance(ground, std, np.asarray(camera_xy, dtype=np.float64), across_m)  # (K,)
     a, b, c = a0[:, None] + var[None, :], b0[:, None], c0[:, None] + var[None, :]  # (K, M) with the prediction's
@@ -212,8 +208,6 @@ def sigmas_from(ground: NDArray, std: NDArray, camera_xy: NDArray, xy: NDArray, 
     with np.errstate(all="ignore"):
         det = a * c - b * b
         m = np.sqrt((c * g[..., 0] ** 2 - 2 * b * g[..., 0] * g[..., 1] + a * g[..., 1] ** 2) / det)
-        if not spread:
-            return m
         return m, 0.5 * np.log(det / (a0 * c0 - b0 * b0)[:, None])
 
 

@@ -14,7 +14,7 @@ from superbody.host.filtering.kalman import AxisCov, cv_predict, cv_update
 if TYPE_CHECKING:
     from superbody.host.tracking.track import Track
 
-__all__ = ["predict_positions", "update_positions", "fuse_positions", "INIT_SPEED_STD"]
+__all__ = ["predict_positions", "predict_tracks", "update_positions", "fuse_positions", "INIT_SPEED_STD"]
 
 NS_PER_S = 1_000_000_000
 
@@ -55,6 +55,24 @@ def update_positions(x: NDArray, P: NDArray, z: NDArray, R: NDArray) -> tuple[ND
     """
     pos, rate, cov = cv_update(x[:, 0], x[:, 1], _axis_cov(P), z, np.asarray(R, dtype=np.float64)[:, None])
     return _packed(pos, rate, cov)
+
+
+def predict_tracks(tracks: list[Track], t_ns: int | NDArray, accel_std_mps2: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The M tracks' positions predicted to ``t_ns`` (one time, or (M,) one per track), in one batch.
+
+    Returns:
+        ``(xy, var)``: (M, 2) positions and (M,) their variance per axis, m^2; NaN for a track
+        that has no position yet.
+    """
+    t = np.broadcast_to(np.asarray(t_ns, dtype=np.int64), (len(tracks),))
+    xy, var = np.full((len(tracks), 2), np.nan), np.full(len(tracks), np.nan)
+    placed = [j for j, tr in enumerate(tracks) if tr.motion is not None]
+    if placed:
+        states = [cast(tuple, tracks[j].motion) for j in placed]
+        x, P = predict_positions(np.array([st[0] for st in states]), np.array([st[1] for st in states]),
+                                 (t[placed] - np.array([st[2] for st in states])) / NS_PER_S, accel_std_mps2)
+        xy[placed], var[placed] = x[:, 0, :], P[:, 0, 0]
+    return xy, var
 
 
 def fuse_positions(tracks: list[Track], xy: NDArray, sigma: NDArray, t_ns: int | NDArray, accel_std_mps2: float) -> None:

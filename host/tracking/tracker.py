@@ -42,7 +42,7 @@ from superbody.host.tracking.config import TrackerConfig
 from superbody.host.tracking.evidence import clearly_sees, set_s_of_one_body
 from superbody.host.tracking.lifecycle import Lifecycle, Newcomer
 from superbody.host.tracking.measure import FrameViews, measure
-from superbody.host.tracking.motion import NS_PER_S, fuse_positions, predict_positions
+from superbody.host.tracking.motion import NS_PER_S, fuse_positions, predict_tracks
 from superbody.host.tracking.track import StampedView, Track
 
 __all__ = ["Tracker"]
@@ -199,14 +199,12 @@ class Tracker:
         tracks = [self._life.tracks.get(int(i)) for i in track_ids]
         ok = np.array([tr is not None for tr in tracks], dtype=bool) & np.isfinite(xy).all(axis=1)
         sigmas, stamps = self.config.same_body_sigmas, np.asarray(stamps_ns, dtype=np.int64)
-        placed = [j for j in np.flatnonzero(ok) if tracks[j].motion is not None] if sigmas > 0 else []  # type: ignore[union-attr]
-        if placed:  # where one body could stand, as views are matched: one batch of predictions
-            states = [tracks[j].motion for j in placed]  # type: ignore[union-attr]
-            x, P = predict_positions(np.array([m[0] for m in states]), np.array([m[1] for m in states]),  # type: ignore[index]
-                                     (stamps[placed] - np.array([m[2] for m in states])) / NS_PER_S,  # type: ignore[index]
-                                     self.config.accel_std_mps2)
-            far = np.hypot(*(xy[placed] - x[:, 0]).T) > sigmas * np.sqrt(P[:, 0, 0] + std_m**2)
-            ok[np.array(placed)[far]] = False
+        idx = np.flatnonzero(ok) if sigmas > 0 else np.empty(0, np.intp)
+        if len(idx):  # where one body could stand, as views are matched: one batch of predictions
+            pred, var = predict_tracks([tracks[j] for j in idx], stamps[idx], self.config.accel_std_mps2)  # type: ignore[misc]
+            with np.errstate(invalid="ignore"):  # NaN: no position yet, nothing to refuse
+                far = np.hypot(*(xy[idx] - pred).T) > sigmas * np.sqrt(var + std_m**2)
+            ok[idx[far]] = False
             self.stats["feedback_refused"] += int(far.sum())
         if ok.any():
             idx = np.flatnonzero(ok)

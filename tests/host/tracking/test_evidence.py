@@ -371,6 +371,23 @@ def test_a_candidate_its_cameras_corroborate_picks_its_persons_views_before_a_va
     assert m.track_id == wanderer.id
 
 
+def _colourless(cam, t: int, spots) -> Observation:
+    """One frame of ``cam`` at ``t`` seeing people at these floor points, without colour."""
+    from superbody.edge.messages.observation import empty_histogram
+    from tests.host.tracking.test_tracker import person_view
+
+    views = [person_view(cam, x, y, 0.0, empty_histogram()) for x, y in spots]
+    return Observation(SITE.name, cam.id, t // 1_000_000, t, cam.width, cam.height, tuple(v for v in views if v is not None))
+
+
+def _person_at_origin_confirmed(tracker: Tracker) -> tuple[Track, int]:
+    """A person at the origin, seen by every camera for 2.5 s: confirmed; and the time then."""
+    for cam, t in schedule(2.5):
+        tracker.update(_colourless(cam, t, [(0.0, 0.0)]))
+    (p,) = tracker.people(T0 + int(2.5 * S))
+    return p, T0 + int(2.5 * S)
+
+
 def test_a_person_hidden_in_one_frame_does_not_take_the_view_of_a_candidate_beside_them():
     """Scene k, seed 40 (12 s): a person stood 0.6 m beside a confirmed one. In the frames of a
     camera that did not see the confirmed one (hidden behind someone), the confirmed track, then
@@ -378,22 +395,11 @@ def test_a_person_hidden_in_one_frame_does_not_take_the_view_of_a_candidate_besi
     where it stood. The newcomer's candidate, starved of its views, was never corroborated, never
     confirmed. A view now matches only a track one body could stand for (``same_body_sigmas``, as
     in set S), and all tracks are matched at once."""
-    from superbody.edge.messages.observation import empty_histogram
-    from tests.host.tracking.test_tracker import person_view
-
     tracker = Tracker(SITE)
-
-    def obs(cam, t, spots):
-        views = [person_view(cam, x, y, 0.0, empty_histogram()) for x, y in spots]
-        return Observation(SITE.name, cam.id, t // 1_000_000, t, cam.width, cam.height, tuple(v for v in views if v is not None))
-
-    for cam, t in schedule(2.5):  # p, confirmed
-        tracker.update(obs(cam, t, [(0.0, 0.0)]))
-    (p,) = tracker.people(T0 + int(2.5 * S))
-    t = T0 + int(2.5 * S)
-    (_, born) = tracker.update(obs(C1, t, [(0.0, 0.0), (0.7, 0.0)]))  # q arrives beside p
+    _, t = _person_at_origin_confirmed(tracker)
+    (_, born) = tracker.update(_colourless(C1, t, [(0.0, 0.0), (0.7, 0.0)]))  # q arrives beside p
     assert born.status == "created"
-    (m,) = tracker.update(obs(C2, t + 30_000_000, [(0.7, 0.0)]))  # C2 sees q alone: p is hidden
+    (m,) = tracker.update(_colourless(C2, t + 30_000_000, [(0.7, 0.0)]))  # C2 sees q alone: p is hidden
     assert m.track_id == born.track_id
 
 
@@ -432,28 +438,18 @@ def test_a_view_within_a_persons_range_error_goes_to_them_not_to_a_candidate_bor
     back under the candidate's id. A view now costs its negative log likelihood under each
     prediction: the person's sure prediction explains a view 0.1 m off along the camera's line of
     sight (its range error) better than the candidate's vague one explains a view on its spot."""
-    from superbody.edge.messages.observation import empty_histogram
     from superbody.host.tracking.motion import INIT_SPEED_STD
-    from tests.host.tracking.test_tracker import person_view
 
     tracker = Tracker(SITE)
-
-    def obs(cam, t, spots):
-        views = [person_view(cam, x, y, 0.0, empty_histogram()) for x, y in spots]
-        return Observation(SITE.name, cam.id, t // 1_000_000, t, cam.width, cam.height, tuple(v for v in views if v is not None))
-
-    for cam, t in schedule(2.5):  # p, confirmed
-        tracker.update(obs(cam, t, [(0.0, 0.0)]))
-    (p,) = tracker.people(T0 + int(2.5 * S))
-    t = T0 + int(2.5 * S)
-    (_, born) = tracker.update(obs(C1, t, [(0.0, 0.0), (1.5, -1.5)]))  # a candidate, then put beside p:
+    p, t = _person_at_origin_confirmed(tracker)
+    (_, born) = tracker.update(_colourless(C1, t, [(0.0, 0.0), (1.5, -1.5)]))  # a candidate, then put beside p:
     cand = tracker.track(born.track_id)
     assert born.status == "created" and cand is not None
     sight = -np.asarray(C1.t[:2]) / np.linalg.norm(C1.t[:2])  # C1's line of sight through p
     spot = 0.1 * sight
     # ... as one point makes it: the view's sigma, the speed unknown.
     cand.set_motion(np.array([spot, [0.0, 0.0]]), np.diag([0.15**2, INIT_SPEED_STD**2]), t)
-    (m,) = tracker.update(obs(C1, t + 30_000_000, [tuple(spot)]))
+    (m,) = tracker.update(_colourless(C1, t + 30_000_000, [tuple(spot)]))
     assert m.track_id == p.id
 
 
@@ -464,20 +460,9 @@ def test_a_candidate_its_cameras_do_not_report_pays_for_each_view_by_how_rarely_
     nearer and surer prediction), their track starved and they came back under a new id. A track
     is matched at a view's cost plus minus the log of the share of its chances it was reported in
     (a person: 0), as a detection probability weighs a likelihood."""
-    from superbody.edge.messages.observation import empty_histogram
-    from tests.host.tracking.test_tracker import person_view
-
     tracker = Tracker(SITE)
-
-    def obs(cam, t, spots):
-        views = [person_view(cam, x, y, 0.0, empty_histogram()) for x, y in spots]
-        return Observation(SITE.name, cam.id, t // 1_000_000, t, cam.width, cam.height, tuple(v for v in views if v is not None))
-
-    for cam, t in schedule(2.5):  # p, confirmed
-        tracker.update(obs(cam, t, [(0.0, 0.0)]))
-    (p,) = tracker.people(T0 + int(2.5 * S))
-    t = T0 + int(2.5 * S)
-    (_, born) = tracker.update(obs(C1, t, [(0.0, 0.0), (1.5, -1.5)]))
+    p, t = _person_at_origin_confirmed(tracker)
+    (_, born) = tracker.update(_colourless(C1, t, [(0.0, 0.0), (1.5, -1.5)]))
     ghost = tracker.track(born.track_id)
     assert born.status == "created" and ghost is not None
     across = np.array([-C1.t[1], C1.t[0]]) / np.linalg.norm(C1.t[:2])  # across C1's line of sight through p
@@ -486,5 +471,5 @@ def test_a_candidate_its_cameras_do_not_report_pays_for_each_view_by_how_rarely_
     for _ in range(19):
         ghost.count_chance(hit=False, seen=True)  # 1 match in 20 chances
     assert ghost.support == pytest.approx(1 / 20)
-    (m,) = tracker.update(obs(C1, t + 30_000_000, [tuple(0.15 * across)]))
+    (m,) = tracker.update(_colourless(C1, t + 30_000_000, [tuple(0.15 * across)]))
     assert m.track_id == p.id
