@@ -3,10 +3,12 @@ tracker's position filter alike.
 
 - ``predict`` and ``update`` are the general form (any n, leading batch dimensions broadcast),
   each equation in a comment above its line;
-- ``cv_predict`` and ``cv_update`` are the step that both filters run: independent axes, each a
+- ``cv_predict`` and ``cv_update`` are the pose filter's step: independent axes, each a
   constant-velocity (position, rate) pair that measures its position, written out per element
   on the 2 x 2 covariance ``AxisCov`` so that a batch of B filters of A axes is a handful of
-  array operations instead of B small matrix products and solves. They give the numbers of
+  array operations instead of B small matrix products and solves. (The tracker's position
+  filter measures x and y together, with a covariance that ties them, so it runs the general
+  form.) They give the numbers of
   ``predict`` / ``update`` with the block-diagonal F, Q, H = [1, 0] per axis and a diagonal R
   (tests/host/filtering/test_kalman.py checks them against the textbook 6 x 6 form).
 
@@ -22,7 +24,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["predict", "update", "white_accel_noise", "AxisCov", "cv_predict", "cv_update"]
+__all__ = ["predict", "update", "white_accel_noise", "continuous_accel_noise", "AxisCov", "cv_predict", "cv_update"]
 
 
 def _T(a: NDArray) -> NDArray:
@@ -90,6 +92,25 @@ def white_accel_noise(dt: float | NDArray, sigma_a: float) -> NDArray[np.float64
     g = np.stack([0.5 * dt * dt, dt], axis=-1)  # (..., 2)
     # Q = sigma_a^2 g g^T = sigma_a^2 [[dt^4/4, dt^3/2], [dt^3/2, dt^2]]
     return sigma_a * sigma_a * g[..., :, None] * g[..., None, :]
+
+
+def continuous_accel_noise(dt: float | NDArray, q: float) -> NDArray[np.float64]:
+    """Process noise of one (position, velocity) axis over ``dt`` seconds under continuous white
+    acceleration of spectral density ``q`` (m^2/s^3): the velocity wanders by ``sqrt(q dt)``.
+
+    Unlike ``white_accel_noise`` (one random acceleration held over each step), two steps of dt/2
+    add up to one of dt: a filter updated by many cameras' frames is no stiffer than one updated
+    by a single camera's.
+
+    A negative ``dt`` (back in time: a late camera's frame) grows the uncertainty alike, by ``|dt|``.
+
+    Returns:
+        (2, 2), or (B, 2, 2) for ``dt`` of shape (B,).
+    """
+    dt = np.asarray(dt, dtype=np.float64)[..., None, None]
+    a = np.abs(dt)
+    # Q = q [[dt^3/3, dt^2/2], [dt^2/2, dt]] (|dt| for the variances, dt's sign on the cross term)
+    return q * np.concatenate([np.concatenate([a**3 / 3, dt * a / 2], axis=-1), np.concatenate([dt * a / 2, a], axis=-1)], axis=-2)
 
 
 class AxisCov(NamedTuple):

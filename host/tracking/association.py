@@ -195,15 +195,15 @@ def associate(t: int, tracks: list[Track], views: FrameViews, cfg: TrackerConfig
     cost = np.where(colour_known, colour_d / cfg.d_max, _UNKNOWN_COLOUR_COST)
     vouched = colour_known
     if cfg.use_geometry:
-        pos, pos_var = predict_tracks(tracks, t, cfg.accel_std_mps2)  # (M, 2), (M,)
-        has_pos, pos_std = ~np.isnan(pos_var), np.sqrt(pos_var)
+        pos, pos_cov = predict_tracks(tracks, t, cfg.accel_std_mps2)  # (M, 2), (M, 2, 2)
+        has_pos, pos_std = ~np.isnan(pos[:, 0]), np.sqrt(0.5 * (pos_cov[:, 0, 0] + pos_cov[:, 1, 1]))
         geo_d = np.linalg.norm(ground[:, None, :] - pos[None, :, :], axis=2)  # (K, M)
         radius = cfg.gate_m + np.hypot(sigma[:, None], pos_std[None, :])  # (K, M)
         geo_known = has_ground[:, None] & has_pos[None, :]
         with np.errstate(invalid="ignore"):
             near = geo_known & (geo_d <= radius)
             body = near
-            sig, spread = sigmas_from(ground, sigma, views.camera_xy, pos, pos_var, cfg.same_body_across_m)
+            sig, spread = sigmas_from(ground, sigma, views.camera_xy, pos, pos_cov, cfg.same_body_across_m)
             if cfg.same_body_sigmas > 0:  # and where one body could stand: the set S test, per view
                 body = near & (sig <= cfg.same_body_sigmas)
             feasible &= ~geo_known | body

@@ -184,16 +184,15 @@ def view_covariance(xy: NDArray, std: NDArray, camera_xy: NDArray, across_m: flo
         return across2 + extra * u[:, 0] ** 2, extra * u[:, 0] * u[:, 1], across2 + extra * u[:, 1] ** 2
 
 
-def sigmas_from(ground: NDArray, std: NDArray, camera_xy: NDArray, xy: NDArray, var: NDArray,
+def sigmas_from(ground: NDArray, std: NDArray, camera_xy: NDArray, xy: NDArray, cov: NDArray,
                 across_m: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(K, M) how many combined 1-sigmas each of one camera's K ground points lies from each of M
     predicted positions: the views' error as in ``one_body`` (``view_covariance``) plus each
-    prediction's (``var`` (M,), the same in every direction). NaN where a point or a prediction is
-    unknown.
+    prediction's (``cov``). NaN where a point or a prediction is unknown.
 
     Args:
         ground: (K, 2) ground points; std: (K,) their 1-sigma; camera_xy: (2,) the camera's floor point.
-        xy: (M, 2) predicted positions; var: (M,) their variance, m^2.
+        xy: (M, 2) predicted positions; cov: (M, 2, 2) their covariances, m^2.
 
     Returns:
         ``(sigmas, spread)``, both (K, M): the sigmas, and ``0.5 log(det C / det V)``, C the
@@ -203,7 +202,7 @@ def sigmas_from(ground: NDArray, std: NDArray, camera_xy: NDArray, xy: NDArray, 
         of the view alone.
     """
     a0, b0, c0 = view_covariance(ground, std, np.asarray(camera_xy, dtype=np.float64), across_m)  # (K,)
-    a, b, c = a0[:, None] + var[None, :], b0[:, None], c0[:, None] + var[None, :]  # (K, M) with the prediction's
+    a, b, c = a0[:, None] + cov[None, :, 0, 0], b0[:, None] + cov[None, :, 0, 1], c0[:, None] + cov[None, :, 1, 1]  # (K, M)
     g = ground[:, None, :] - xy[None, :, :]  # (K, M, 2)
     with np.errstate(all="ignore"):
         det = a * c - b * b

@@ -11,6 +11,7 @@ from numpy.typing import NDArray
 
 from superbody.edge.colour import HIST_BINS
 from superbody.edge.messages.observation import PersonView
+from superbody.host.tracking.config import TrackerConfig
 from superbody.host.tracking.motion import NS_PER_S, predict_positions
 
 __all__ = ["StampedView", "Track"]
@@ -62,7 +63,7 @@ class Track:
     _streak_ns: int = field(default=0, init=False, repr=False)  # start of the steady matches
     _kf_t: int | None = field(default=None, init=False, repr=False)  # time of the position state
     _kf_x: NDArray[np.float64] = field(init=False, repr=False)  # (2, 2): rows (pos, vel), columns (x, y)
-    _kf_P: NDArray[np.float64] = field(init=False, repr=False)  # (2, 2) shared by both columns
+    _kf_P: NDArray[np.float64] = field(init=False, repr=False)  # (4, 4) of (x, y, vx, vy)
     # Since the steady matches began (host.tracking.evidence): frames of cameras that clearly saw
     # where the candidate stood, or matched it (chances), and those that matched it.
     _chances: int = field(default=1, init=False, repr=False)
@@ -77,7 +78,7 @@ class Track:
         self._amp = np.zeros((self.history_q, BINS))
         self._streak_ns = self.first_seen_ns
         self._kf_x = np.zeros((2, 2))
-        self._kf_P = np.eye(2)
+        self._kf_P = np.eye(4)
 
     @property
     def histograms(self) -> NDArray[np.float32]:
@@ -98,19 +99,19 @@ class Track:
 
     @property
     def position_std(self) -> float:
-        """1-sigma of the position estimate per axis, metres (NaN if unknown)."""
-        return math.nan if self._kf_t is None else math.sqrt(self._kf_P[0, 0])
+        """1-sigma of the position estimate per axis (the root of the mean of the x and y variances), metres (NaN if unknown)."""
+        return math.nan if self._kf_t is None else math.sqrt(0.5 * (self._kf_P[0, 0] + self._kf_P[1, 1]))
 
     @property
     def position_stamp_ns(self) -> int | None:
         return self._kf_t
 
-    def predict_position(self, t_ns: int, accel_std_mps2: float = 2.0) -> tuple[NDArray[np.float64], float] | None:
-        """Predicted floor position (2,) at ``t_ns`` and its 1-sigma per axis, or None if unknown."""
+    def predict_position(self, t_ns: int, accel_std_mps2: float = TrackerConfig.accel_std_mps2) -> tuple[NDArray[np.float64], float] | None:
+        """Predicted floor position (2,) at ``t_ns`` and its 1-sigma per axis (as ``position_std``), or None if unknown."""
         if self._kf_t is None:
             return None
         x, P = predict_positions(self._kf_x[None], self._kf_P[None], np.array([(t_ns - self._kf_t) / NS_PER_S]), accel_std_mps2)
-        return x[0, 0], math.sqrt(P[0, 0, 0])
+        return x[0, 0], math.sqrt(0.5 * (P[0, 0, 0] + P[0, 1, 1]))
 
     @property
     def colours(self) -> NDArray[np.float64]:
@@ -130,7 +131,7 @@ class Track:
 
     @property
     def motion(self) -> tuple[NDArray[np.float64], NDArray[np.float64], int] | None:
-        """The position filter's state: x (2, 2) rows (position, velocity), columns (x, y); P (2, 2); its time (ns)."""
+        """The position filter's state: x (2, 2) rows (position, velocity), columns (x, y); P (4, 4) of x read row by row; its time (ns)."""
         return None if self._kf_t is None else (self._kf_x, self._kf_P, self._kf_t)
 
     def set_motion(self, x: NDArray[np.float64], P: NDArray[np.float64], t_ns: int) -> None:

@@ -39,7 +39,7 @@ from superbody.edge.messages.observation import Observation, PersonView
 from superbody.edge.site import Site
 from superbody.host.tracking.association import Match, associate
 from superbody.host.tracking.config import TrackerConfig
-from superbody.host.tracking.evidence import clearly_sees, set_s_of_one_body
+from superbody.host.tracking.evidence import clearly_sees, set_s_of_one_body, view_covariance
 from superbody.host.tracking.lifecycle import Lifecycle, Newcomer
 from superbody.host.tracking.measure import FrameViews, measure
 from superbody.host.tracking.motion import NS_PER_S, fuse_positions, predict_tracks
@@ -171,7 +171,9 @@ class Tracker:
         fused = [(tr, r) for tr, r in fused if views.has_ground[r]]
         if fused:
             rs = np.array([r for _, r in fused])
-            fuse_positions([tr for tr, _ in fused], views.ground[rs], views.sigma[rs], t, self.config.accel_std_mps2)
+            a, b, c = view_covariance(views.ground[rs], views.sigma[rs], views.camera_xy, self.config.same_body_across_m)
+            R = np.stack([np.stack([a, b], axis=1), np.stack([b, c], axis=1)], axis=1)  # (B, 2, 2)
+            fuse_positions([tr for tr, _ in fused], views.ground[rs], R, t, self.config.accel_std_mps2)
 
     def set_position(self, track_id: int, xy: NDArray | tuple[float, float], stamp_ns: int, std_m: float = 0.1) -> bool:
         """Feed back a better position (e.g. the GNN's) for a track, as a measurement of 1-sigma ``std_m``.
@@ -201,14 +203,16 @@ class Tracker:
         sigmas, stamps = self.config.same_body_sigmas, np.asarray(stamps_ns, dtype=np.int64)
         idx = np.flatnonzero(ok) if sigmas > 0 else np.empty(0, np.intp)
         if len(idx):  # where one body could stand, as views are matched: one batch of predictions
-            pred, var = predict_tracks([tracks[j] for j in idx], stamps[idx], self.config.accel_std_mps2)  # type: ignore[misc]
+            pred, cov = predict_tracks([tracks[j] for j in idx], stamps[idx], self.config.accel_std_mps2)  # type: ignore[misc]
+            g, C = xy[idx] - pred, cov + std_m**2 * np.eye(2)  # (B, 2), (B, 2, 2)
             with np.errstate(invalid="ignore"):  # NaN: no position yet, nothing to refuse
-                far = np.hypot(*(xy[idx] - pred).T) > sigmas * np.sqrt(var + std_m**2)
+                far = (C[:, 1, 1] * g[:, 0] ** 2 - 2 * C[:, 0, 1] * g[:, 0] * g[:, 1] + C[:, 0, 0] * g[:, 1] ** 2) \
+                    > sigmas**2 * (C[:, 0, 0] * C[:, 1, 1] - C[:, 0, 1] ** 2)
             ok[idx[far]] = False
             self.stats["feedback_refused"] += int(far.sum())
         if ok.any():
             idx = np.flatnonzero(ok)
-            fuse_positions([tracks[i] for i in idx], xy[idx], np.full(len(idx), float(std_m)),  # type: ignore[misc]
+            fuse_positions([tracks[i] for i in idx], xy[idx], np.tile(std_m**2 * np.eye(2), (len(idx), 1, 1)),  # type: ignore[misc]
                             stamps[idx], self.config.accel_std_mps2)
         return ok
 

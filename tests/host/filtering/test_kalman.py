@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from superbody.host.filtering.kalman import AxisCov, cv_predict, cv_update, predict, update, white_accel_noise
+from superbody.host.filtering.kalman import AxisCov, continuous_accel_noise, cv_predict, cv_update, predict, update, white_accel_noise
 
 
 def _six_state(rng: np.random.Generator, B: int) -> tuple[np.ndarray, np.ndarray]:
@@ -62,3 +62,21 @@ def test_update_moves_towards_the_measurement_by_the_gain() -> None:
     pos, rate, cov = cv_update(np.array([0.0]), np.array([0.0]), AxisCov(*(np.array([v]) for v in (1.0, 0.0, 0.0, 1.0))),
                                np.array([1.0]), np.array([1.0]))
     assert pos[0] == pytest.approx(0.5) and cov.p00[0] == pytest.approx(0.5) and rate[0] == 0.0
+
+
+def test_continuous_acceleration_noise_does_not_depend_on_how_often_the_filter_steps() -> None:
+    # One second in one step, or in 75 (five cameras at 15 fps each): the same prediction covariance.
+    # The piecewise-constant model (white_accel_noise) makes the second 75 times stiffer in velocity.
+    F = lambda dt: np.array([[1.0, dt], [0.0, 1.0]])  # noqa: E731
+    P0 = np.diag([0.01, 0.04])
+    for noise, same in ((lambda dt: continuous_accel_noise(dt, 4.0), True), (lambda dt: white_accel_noise(dt, 2.0), False)):
+        once = predict(np.zeros(2), P0, F(1.0), noise(1.0))[1]
+        P = P0
+        for _ in range(75):
+            P = predict(np.zeros(2), P, F(1 / 75), noise(1 / 75))[1]
+        assert np.allclose(P, once) == same
+    assert np.isclose(continuous_accel_noise(1.0, 4.0)[1, 1], 4.0)  # the velocity wanders by sqrt(q) a second
+    assert continuous_accel_noise(np.array([0.1, 0.2]), 4.0).shape == (2, 2, 2)
+    back = continuous_accel_noise(-0.5, 4.0)  # back in time (a late frame): as uncertain, the cross term turned
+    assert np.allclose(np.diag(back), np.diag(continuous_accel_noise(0.5, 4.0))) and back[0, 1] < 0
+    assert np.all(np.linalg.eigvalsh(back) >= 0)

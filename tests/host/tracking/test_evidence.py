@@ -58,7 +58,7 @@ def test_two_tracks_one_camera_frame_matched_both_are_two_people_however_close()
 
 def _placed(tid: int, xy: tuple[float, float], confirmed_ns: int) -> Track:
     tr = Track(tid, str(tid), "confirmed", 0, confirmed_ns, 4, confirmed_ns=confirmed_ns)
-    tr.set_motion(np.array([xy, [0.0, 0.0]]), np.eye(2), confirmed_ns)
+    tr.set_motion(np.array([xy, [0.0, 0.0]]), np.eye(4), confirmed_ns)
     return tr
 
 
@@ -68,7 +68,7 @@ def test_the_younger_of_two_coincident_tracks_goes_after_a_while_and_only_then()
     assert coincident(people, 10 * S, 0.3) == []  # close from now on
     assert coincident(people, 10 * S + int(MERGE_AFTER_S * S) - 1, 0.3) == []
     assert coincident(people, 10 * S + int(MERGE_AFTER_S * S), 0.3) == [young]
-    young.set_motion(np.array([(0.5, 0.0), (0.0, 0.0)]), np.eye(2), 20 * S)  # walked apart: the clock restarts
+    young.set_motion(np.array([(0.5, 0.0), (0.0, 0.0)]), np.eye(4), 20 * S)  # walked apart: the clock restarts
     assert coincident(people, 20 * S, 0.3) == [] and young.close_since_ns is None
 
 
@@ -358,7 +358,7 @@ def test_a_candidate_its_cameras_corroborate_picks_its_persons_views_before_a_va
     assert wanderer is not None and wanderer is not person
     # ... whose random walk brought its prediction onto the person, vague, its cameras silent.
     assert person.motion is not None
-    wanderer.set_motion(np.array([person.position, [0.0, 0.0]]), np.diag([0.2, 2.0]), person.motion[2])
+    wanderer.set_motion(np.array([person.position, [0.0, 0.0]]), np.diag([0.2, 0.2, 2.0, 2.0]), person.motion[2])
     wanderer.restart_streak(wanderer.streak_start_ns)  # 3 matches in 30 chances
     for k in range(29):
         wanderer.count_chance(hit=k < 2, seen=True)
@@ -366,7 +366,7 @@ def test_a_candidate_its_cameras_corroborate_picks_its_persons_views_before_a_va
         (m,) = tracker.update(obs(cam, t + (k + 1) * 30_000_000, 0.0, 0.0))
         assert m.track_id == person.id
     t += S // 2
-    wanderer.set_motion(np.array([person.position + (0.8, 0.0), [0.0, 0.0]]), np.diag([0.01, 0.1]), t)
+    wanderer.set_motion(np.array([person.position + (0.8, 0.0), [0.0, 0.0]]), np.diag([0.01, 0.01, 0.1, 0.1]), t)
     (m,) = tracker.update(obs(C2, t, float(person.position[0]) + 0.8, float(person.position[1])))
     assert m.track_id == wanderer.id
 
@@ -448,7 +448,7 @@ def test_a_view_within_a_persons_range_error_goes_to_them_not_to_a_candidate_bor
     sight = -np.asarray(C1.t[:2]) / np.linalg.norm(C1.t[:2])  # C1's line of sight through p
     spot = 0.1 * sight
     # ... as one point makes it: the view's sigma, the speed unknown.
-    cand.set_motion(np.array([spot, [0.0, 0.0]]), np.diag([0.15**2, INIT_SPEED_STD**2]), t)
+    cand.set_motion(np.array([spot, [0.0, 0.0]]), np.diag([0.15**2, 0.15**2, INIT_SPEED_STD**2, INIT_SPEED_STD**2]), t)
     (m,) = tracker.update(_colourless(C1, t + 30_000_000, [tuple(spot)]))
     assert m.track_id == p.id
 
@@ -466,7 +466,7 @@ def test_a_candidate_its_cameras_do_not_report_pays_for_each_view_by_how_rarely_
     ghost = tracker.track(born.track_id)
     assert born.status == "created" and ghost is not None
     across = np.array([-C1.t[1], C1.t[0]]) / np.linalg.norm(C1.t[:2])  # across C1's line of sight through p
-    ghost.set_motion(np.array([0.2 * across, [0.0, 0.0]]), np.diag([0.02**2, 0.05**2]), t)  # sure, beside p
+    ghost.set_motion(np.array([0.2 * across, [0.0, 0.0]]), np.diag([0.02**2, 0.02**2, 0.05**2, 0.05**2]), t)  # sure, beside p
     ghost.restart_streak(t)
     for _ in range(19):
         ghost.count_chance(hit=False, seen=True)  # 1 match in 20 chances

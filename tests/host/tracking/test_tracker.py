@@ -480,14 +480,15 @@ def test_assign(cost, feasible, pairs):
 def test_joint_assignment_beats_greedy_in_the_tracker():
     same = 40.0  # everyone in the same colour: only geometry tells them apart
     tr = Tracker(SITE)
-    run(tr, (frame(cam, t, {"p": (0.0, 0.0, 0.0, same), "q": (0.6, 0.0, 0.0, same)}, seed=k)
+    run(tr, (frame(cam, t, {"p": (0.0, 0.0, 0.0, same), "q": (0.0, 0.6, 0.0, same)}, seed=k)
              for k, (cam, t) in enumerate(schedule(1.0))))
     t1, t2 = tr.tracks
-    assert np.allclose(t1.position, (0.0, 0.0), atol=0.1) and np.allclose(t2.position, (0.6, 0.0), atol=0.1)
-    # Next frame: view A at x=0.2 is nearest track 1; view B at x=-0.3 can only be track 1 (0.9 m
-    # from track 2, beyond one body's 3 sigmas). Greedy nearest-first gives A to track 1 and strands B.
+    assert np.allclose(t1.position, (0.0, 0.0), atol=0.1) and np.allclose(t2.position, (0.0, 0.6), atol=0.1)
+    # Next frame, from c3 (at y = -4.5, looking along y: its ground points are unsure in y): view A
+    # at y = 0.2 is nearest track 1; view B at y = -0.3 can only be track 1 (0.9 m from track 2,
+    # beyond one body's 3 sigmas). Greedy nearest-first gives A to track 1 and strands B.
     t = T0 + S
-    obs, _ = frame(C1, t, {"A": (0.2, 0.0, 0.0, same), "B": (-0.3, 0.0, 0.0, same)}, seed=999)
+    obs, _ = frame(C3, t, {"A": (0.0, 0.2, 0.0, same), "B": (0.0, -0.3, 0.0, same)}, seed=999)
     matches = tr.update(obs)
     assert [m.status for m in matches] == ["matched", "matched"]
     assert [m.track_id for m in matches] == [t2.id, t1.id]
@@ -636,24 +637,36 @@ def test_set_positions_equals_set_position_one_by_one():
         assert np.allclose(a.track(i).position, b.track(i).position) and a.track(i).position_stamp_ns == b.track(i).position_stamp_ns
 
 
-def test_position_filter_written_out_equals_the_textbook_one():
-    # The tracker's per-element Kalman steps against host.filtering.pose_filter's matrix ones, on random states.
-    from superbody.host.filtering.kalman import predict, update, white_accel_noise
+def test_position_filter_is_two_textbook_axes_for_a_point_alike_in_every_direction():
+    # The tracker's (x, y, vx, vy) filter against host.filtering.kalman's textbook steps run on each
+    # axis's (position, velocity) alone, on random states whose axes share a covariance.
+    from superbody.host.filtering.kalman import continuous_accel_noise, predict, update
     from superbody.host.tracking.motion import predict_positions, update_positions
 
     rng = np.random.default_rng(4)
     B = 7
     x = rng.normal(size=(B, 2, 2))
     A = rng.normal(size=(B, 2, 2))
-    P = A @ A.transpose(0, 2, 1) + 0.1 * np.eye(2)  # (B, 2, 2) symmetric positive definite
+    P2 = A @ A.transpose(0, 2, 1) + 0.1 * np.eye(2)  # (B, 2, 2) symmetric positive definite
     dt = rng.uniform(0.0, 1.5, B)
-    F = np.zeros((B, 2, 2))
-    F[:, 0, 0] = F[:, 1, 1] = 1.0
-    F[:, 0, 1] = dt
-    xe, Pe = predict(x, P, F, white_accel_noise(dt, 2.0))
-    xg, Pg = predict_positions(x, P, dt, 2.0)
-    assert np.allclose(xg, xe, atol=1e-12) and np.allclose(Pg, Pe, atol=1e-12)
     z, R = rng.normal(size=(B, 2)), rng.uniform(0.01, 1.0, B)
-    xe, Pe = update(xe, Pe, z[:, None, :], np.array([[1.0, 0.0]]), R[:, None, None])
-    xg, Pg = update_positions(xg, Pg, z, R)
-    assert np.allclose(xg, xe, atol=1e-12) and np.allclose(Pg, Pe, atol=1e-12)
+    xg, Pg = predict_positions(x, np.kron(P2, np.eye(2)), dt, 2.0)
+    xg, Pg = update_positions(xg, Pg, z, R[:, None, None] * np.eye(2))
+    F = np.tile(np.eye(2), (B, 1, 1))
+    F[:, 0, 1] = dt
+    for a in range(2):  # each axis: (position, velocity), its column of x
+        xa, Pa = predict(x[:, :, a, None], P2, F, continuous_accel_noise(dt, 4.0))
+        xa, Pa = update(xa, Pa, z[:, a, None, None], np.array([[1.0, 0.0]]), R[:, None, None])
+        assert np.allclose(xg[:, :, a], xa[:, :, 0], atol=1e-12)
+        assert np.allclose(Pg[:, a::2, a::2], Pa, atol=1e-12)
+    assert np.allclose(Pg[:, 0::2, 1::2], 0.0)  # and the axes stay apart
+
+
+def test_a_point_sure_across_its_line_of_sight_pins_the_track_down_across_it():
+    from superbody.host.tracking.motion import update_positions
+
+    x, P = np.zeros((1, 2, 2)), np.diag([0.3**2, 0.3**2, 1.0, 1.0])[None]
+    R = np.diag([0.3**2, 0.05**2])[None]  # a camera on the x axis: unsure in x (its range), sure in y
+    x, P = update_positions(x, P, np.array([[0.2, 0.2]]), R)
+    assert np.isclose(x[0, 0, 0], 0.1) and x[0, 0, 1] > 0.19  # x halfway (two equal sigmas); y nearly all the way
+    assert np.isclose(P[0, 0, 0], 0.3**2 / 2) and P[0, 1, 1] < 0.05**2
