@@ -75,9 +75,9 @@ class TrackerConfig:
             person) the live CV is unchanged at 3; at 2.5 real views were left out (live yaw
             7.61 -> 7.73 deg, with the rule's first, pairwise form).
         same_body_across_m: a view's ground point's 1-sigma across its camera's line of sight,
-            for that test and for the tracks' position filters (``host.tracking.motion``; along it,
-            the point's own sigma: a range from a body part's assumed height). The bearing comes from pixels: what is left is the calibration's and the
-            detector's error. 0.08: dev.json's real sets (3 cameras) then have a view beyond
+            for that test and for the tracks' position filters (``host.tracking.motion``; along
+            it, the point's own sigma: a range from a body part's assumed height). The bearing
+            comes from pixels: what is left is the calibration's and the detector's error. 0.08: dev.json's real sets (3 cameras) then have a view beyond
             3 sigmas in 0.3% of them; at 0.05, in 3.3%, and the live figures get worse.
     """
 

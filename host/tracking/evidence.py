@@ -52,7 +52,7 @@ from superbody.edge.site import Obstacle
 from superbody.host.tracking.motion import NS_PER_S
 from superbody.host.tracking.track import StampedView, Track
 
-__all__ = ["EDGE_MARGIN", "MERGE_AFTER_S", "TORSO_CENTRE_M", "clearly_sees", "corroborated", "too_close", "coincident", "seen_together", "one_body", "set_s_of_one_body", "sigmas_from", "view_covariance"]
+__all__ = ["EDGE_MARGIN", "MERGE_AFTER_S", "TORSO_CENTRE_M", "clearly_sees", "corroborated", "too_close", "coincident", "seen_together", "one_body", "set_s_of_one_body", "sigmas_from", "squared_sigmas", "view_covariance"]
 
 TORSO_CENTRE_M = 1.15  # height of a standing adult's torso centre (between hips 0.9 m and shoulders 1.4 m)
 EDGE_MARGIN = 0.1  # fraction of the image's width and height left out on each side
@@ -159,7 +159,7 @@ def one_body(views: dict[str, StampedView], near_xy: NDArray | None, sigmas: flo
         rx, ry = bx[k].sum() - bx[k], by[k].sum() - by[k]
         gx, gy = xy[k, 0] - (ca * rx + cb * ry), xy[k, 1] - (cb * rx + cc * ry)
         ma, mb, mc = a[k] + ca, b[k] + cb, c[k] + cc  # the gap's covariance
-        d2 = (mc * gx * gx - 2 * mb * gx * gy + ma * gy * gy) / (ma * mc - mb * mb)  # (K,)
+        d2 = squared_sigmas(gx, gy, ma, mb, mc)  # (K,)
         if not (d2 > sigmas**2).any():
             break
         # The worst goes (two views are equally far from each other; ties: the one farthest from
@@ -167,6 +167,12 @@ def one_body(views: dict[str, StampedView], near_xy: NDArray | None, sigmas: flo
         order = np.lexsort((joints[k], -np.nan_to_num(far[k]), -np.round(d2, 6)))
         keep[k[order[0]]] = False
     return [cam for cam, kept, p in zip(cams, keep, placed, strict=True) if kept or not p]
+
+
+def squared_sigmas(gx: NDArray, gy: NDArray, a: NDArray, b: NDArray, c: NDArray) -> NDArray[np.float64]:
+    """The squared Mahalanobis distance of gaps (gx, gy) under covariances ``[[a, b], [b, c]]``
+    (all arrays broadcast): ``g^T C^-1 g``, the 2 x 2 inverse written out."""
+    return np.asarray((c * gx * gx - 2 * b * gx * gy + a * gy * gy) / (a * c - b * b), dtype=np.float64)
 
 
 def view_covariance(xy: NDArray, std: NDArray, camera_xy: NDArray, across_m: float) -> tuple[NDArray, NDArray, NDArray]:
@@ -206,7 +212,7 @@ def sigmas_from(ground: NDArray, std: NDArray, camera_xy: NDArray, xy: NDArray, 
     g = ground[:, None, :] - xy[None, :, :]  # (K, M, 2)
     with np.errstate(all="ignore"):
         det = a * c - b * b
-        m = np.sqrt((c * g[..., 0] ** 2 - 2 * b * g[..., 0] * g[..., 1] + a * g[..., 1] ** 2) / det)
+        m = np.sqrt(squared_sigmas(g[..., 0], g[..., 1], a, b, c))
         return m, 0.5 * np.log(det / (a0 * c0 - b0 * b0)[:, None])
 
 

@@ -39,7 +39,7 @@ from superbody.edge.messages.observation import Observation, PersonView
 from superbody.edge.site import Site
 from superbody.host.tracking.association import Match, associate
 from superbody.host.tracking.config import TrackerConfig
-from superbody.host.tracking.evidence import clearly_sees, set_s_of_one_body, view_covariance
+from superbody.host.tracking.evidence import clearly_sees, set_s_of_one_body, squared_sigmas, view_covariance
 from superbody.host.tracking.lifecycle import Lifecycle, Newcomer
 from superbody.host.tracking.measure import FrameViews, measure
 from superbody.host.tracking.motion import NS_PER_S, fuse_positions, predict_tracks
@@ -206,8 +206,7 @@ class Tracker:
             pred, cov = predict_tracks([tracks[j] for j in idx], stamps[idx], self.config.accel_std_mps2)  # type: ignore[misc]
             g, C = xy[idx] - pred, cov + std_m**2 * np.eye(2)  # (B, 2), (B, 2, 2)
             with np.errstate(invalid="ignore"):  # NaN: no position yet, nothing to refuse
-                far = (C[:, 1, 1] * g[:, 0] ** 2 - 2 * C[:, 0, 1] * g[:, 0] * g[:, 1] + C[:, 0, 0] * g[:, 1] ** 2) \
-                    > sigmas**2 * (C[:, 0, 0] * C[:, 1, 1] - C[:, 0, 1] ** 2)
+                far = squared_sigmas(g[:, 0], g[:, 1], C[:, 0, 0], C[:, 0, 1], C[:, 1, 1]) > sigmas**2
             ok[idx[far]] = False
             self.stats["feedback_refused"] += int(far.sum())
         if ok.any():
