@@ -56,7 +56,8 @@ class TrackerConfig:
             for the policy when full); at most ``host.messages.pose.MAX_PEOPLE`` so every PoseArray
             can be published.
         reid_window_s: a removed person is remembered this long for re-identification
-            (0 turns re-identification off).
+            (``host.tracking.reid``; a person unseen for over ``confirm_max_gap_s`` is a
+            candidate for it too; 0 turns re-identification off, both kinds).
         reid_d_max: a new person is re-identified as a remembered one only if the median
             Bhattacharyya distance between their colour histories is below this.
         reid_speed_mps: ... and if the remembered person, walking at this speed, could have

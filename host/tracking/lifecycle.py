@@ -21,8 +21,9 @@ duplicates that later split a person's views between two ids.
 ``confirm_after_s``, the paper's 2 s, without a gap over ``confirm_max_gap_s``), ``corroborated``
 (the cameras that clearly see where it stands matched it in ``confirm_min_support`` of their
 frames: ``host.tracking.evidence``), ``apart`` (not within ``min_separation_m`` of a confirmed
-person). Counted: ``confirmed``; then ``reidentified`` when it is a person removed a moment ago
-(``host.tracking.reid``).
+person). Counted: ``confirmed``; then ``reidentified`` when it is a person removed a moment ago,
+or a person unseen for over ``confirm_max_gap_s`` whose views it took (that track goes: one body,
+one id; ``host.tracking.reid``).
 
 **Death** (``prune``): ``merged`` (the younger of two confirmed tracks that stood inside each other
 for ``evidence.MERGE_AFTER_S``), ``removed`` (a person unseen for ``remove_after_s``, remembered
@@ -37,7 +38,7 @@ from typing import NamedTuple
 from superbody.host.tracking.config import TrackerConfig
 from superbody.host.tracking.evidence import coincident, too_close
 from superbody.host.tracking.motion import NS_PER_S
-from superbody.host.tracking.reid import Lost, remembered_as
+from superbody.host.tracking.reid import Lost, remember, remembered_as
 from superbody.host.tracking.track import Track
 
 __all__ = ["Newcomer", "BIRTH_VETOES", "CONFIRMATION", "Lifecycle"]
@@ -115,10 +116,15 @@ class Lifecycle:
         self.stats["confirmed"] += 1
         self._forget_lost(t)
         others = [o for o in self.tracks.values() if o is not tr and o.state == "confirmed"]
-        lost = remembered_as(tr, t, self.lost.values(), others, self.config)
+        unseen = [o for o in others if t - o.last_seen_ns > self.gap_ns] if self._reid_ns > 0 else []
+        present = [o for o in others if o not in unseen]
+        lost = remembered_as(tr, t, [*self.lost.values(), *map(remember, unseen)], present, self.config)
         if lost is None:
             return
-        del self.lost[lost.id]
+        if lost.id in self.lost:
+            del self.lost[lost.id]
+        else:  # a person whose views this candidate took: one body, their id
+            del self.tracks[lost.id]
         del self.tracks[tr.id]
         tr.id, tr.label = lost.id, lost.label
         self.tracks[tr.id] = tr
@@ -137,7 +143,7 @@ class Lifecycle:
             del self.tracks[tr.id]
             self.stats["removed" if tr.state == "confirmed" else "dropped_candidates"] += 1
             if tr.state == "confirmed" and len(tr.colours) and self._reid_ns > 0:
-                self.lost[tr.id] = Lost(tr.id, tr.label, tr.colours.copy(), tr.position, tr.last_seen_ns)
+                self.lost[tr.id] = remember(tr)
         while len(self.lost) > cfg.max_tracks:  # bounded whatever the input
             del self.lost[next(iter(self.lost))]
         self._forget_lost(now_ns)

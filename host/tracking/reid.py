@@ -1,10 +1,13 @@
-"""Re-identification: whether a just-confirmed track is a person the tracker removed a moment ago.
+"""Re-identification: whether a just-confirmed track is a person the tracker lost a moment ago.
 
-A removed person is remembered (``Lost``) for ``TrackerConfig.reid_window_s``. A new person takes a
-remembered person's id back when their colours match that one remembered person clearly (median
-Bhattacharyya distance between the two histories below ``reid_d_max``, the next remembered
-person and every person present at least ``REID_MARGIN`` further) and that person could have
-walked to where the new one stands. See ``host.tracking.tracker``'s module docstring.
+A removed person is remembered (``Lost``) for ``TrackerConfig.reid_window_s``; so is, for this test
+only, a person still tracked but unseen for over ``confirm_max_gap_s`` (``Lifecycle.confirm_if_due``:
+a candidate that took a person's views is confirmed 2 s after it began, which may come before the
+person it took them from is removed, 2 s after their last view). A new person takes a lost
+person's id back when their colours match that one lost person clearly (median Bhattacharyya
+distance between the two histories below ``reid_d_max``, the next lost person and every person
+present at least ``REID_MARGIN`` further) and that person could have walked to where the new one
+stands. See ``host.tracking.tracker``'s module docstring.
 """
 
 from __future__ import annotations
@@ -19,7 +22,7 @@ from superbody.host.tracking.config import TrackerConfig
 from superbody.host.tracking.motion import NS_PER_S
 from superbody.host.tracking.track import Track
 
-__all__ = ["Lost", "REID_MARGIN", "remembered_as"]
+__all__ = ["Lost", "REID_MARGIN", "remember", "remembered_as"]
 
 # Re-identification needs the best remembered person this much closer in colour than the next.
 REID_MARGIN = 0.1
@@ -35,13 +38,18 @@ class Lost(NamedTuple):
     last_seen_ns: int
 
 
+def remember(tr: Track) -> Lost:
+    """A person as re-identification remembers them: id, colours, last position and when last seen."""
+    return Lost(tr.id, tr.label, tr.colours.copy(), tr.position, tr.last_seen_ns)
+
+
 def remembered_as(tr: Track, t: int, lost: Iterable[Lost], present: Iterable[Track], cfg: TrackerConfig) -> Lost | None:
     """The one remembered person a just-confirmed track clearly is, or None.
 
     Args:
         tr: the track just confirmed at ``t`` (capture time, ns).
-        lost: the people remembered.
-        present: the other confirmed people now (certainly not the lost one).
+        lost: the people remembered (removed, or unseen a while).
+        present: the other confirmed people now, seen lately (certainly not the lost one).
         cfg: the tracker's parameters.
     """
     mine = tr.colours  # (n, B)

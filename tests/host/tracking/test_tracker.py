@@ -570,6 +570,31 @@ def test_reidentification_needs_a_clear_winner_and_a_reachable_place():
     assert [p.id for p in tr.people(t + 25 * S // 10)] == [2]
 
 
+@pytest.mark.parametrize(("hue_b", "same_id"), [(20.0, True), (110.0, False)])
+def test_a_candidate_that_took_a_persons_views_is_that_person(hue_b, same_id):
+    # A second skeleton of someone, 0.8 m to their side, starts a candidate; 0.5 s later their own
+    # views stop (their track can no longer take them) and only that skeleton's go on. The
+    # candidate is confirmed 2 s after it began, before the person's track is removed (2 s after
+    # their last view): it is that person, and keeps their id. In other clothes (someone who came
+    # in as the person left), it is someone else.
+    tr = Tracker(SITE)
+    frames = schedule(6.0)
+    lost_at = T0 + 3 * S  # the person's own views stop here
+    ids_after: set[int] = set()
+    for cam, t in frames:
+        people = {}
+        if t < lost_at:
+            people["a"] = (0.0, 0.0, 0.0, 20.0)
+        if t >= lost_at - S // 2:
+            people["b"] = (0.8, 0.0, 0.0, hue_b)
+        tr.update(frame(cam, t, people, seed=t // (S // 10))[0])
+        tr.prune(t)
+        if t >= lost_at + 5 * S // 2:
+            ids_after |= {p.id for p in tr.people(t)}
+    assert tr.stats["confirmed"] == 2  # the person, then the candidate
+    assert (ids_after == {1}) == same_id and tr.stats["reidentified"] == int(same_id), (ids_after, tr.stats)
+
+
 # --- a cap on tracks --------------------------------------------------------------------------------
 
 def test_a_flood_of_copies_is_one_detection_and_people_already_tracked_keep_their_ids():
