@@ -1,7 +1,8 @@
 """What each simulated camera's 2D detector reports of the world.
 
 ``render_views`` projects each person's joints through the camera model, drops those outside
-the image, behind obstacles or other people, applies the detector noise model
+the image, behind obstacles or other people (a few hidden ones are still guessed, as detectors
+do, but only for a person with a joint in plain view), applies the detector noise model
 (``edge/sim/noise.py``) and computes each person's colour signature from a synthetic patch of
 their clothing under the camera's lighting (``edge/sim/appearance.py``); ``SimCamera`` turns
 that into Observations.
@@ -81,7 +82,9 @@ def render_views(
         p = np.where(occluded, p * noise.occluded_keep, p)
         visible = inside & (rng.uniform(size=body.NUM_KEYPOINTS) < p)
         miss = noise.view_miss_prob + noise.truncated_miss_prob * (1.0 - inside.mean())
-        if visible.sum() < max(noise.min_joints, 1) or rng.uniform() < miss:
+        # A detector guesses the hidden joints of a person it sees, never a person it cannot
+        # see: one found joint at least must be in plain view (not someone behind a wall).
+        if visible.sum() < max(noise.min_joints, 1) or not (visible & ~occluded).any() or rng.uniform() < miss:
             continue
         score = rng.normal(noise.score_mean + 0.5 * quality, noise.score_std, size=body.NUM_KEYPOINTS)
         # Pixel noise grows with the person's apparent size (closer = bigger errors in pixels).

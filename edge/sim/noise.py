@@ -80,7 +80,8 @@ class NoiseModel:
         distance_drop: detection probability lost per metre beyond 3 m.
         border_px: joints within this many pixels of the image border are found less often.
         occluded_keep: probability that a joint hidden by an obstacle or a person is still
-            reported (detectors hallucinate plausible joints).
+            reported (detectors hallucinate plausible joints), for a person reported at all:
+            one with at least one joint found in plain view.
         score_mean, score_std: the reported confidence of a detected joint, before clipping to
             [score_threshold, 1].
         score_threshold: nothing below this confidence is reported (OpenPifPaf used 0.5).

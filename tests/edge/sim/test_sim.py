@@ -153,6 +153,25 @@ def test_obstacle_hides_joints_behind_it(site):
     assert free and free[0][1].num_visible > (seen[0][1].num_visible if seen else 0)
 
 
+@pytest.mark.parametrize(("wall_top_m", "reported"), [(4.0, False), (1.0, True)])
+def test_a_person_with_no_joint_in_plain_view_is_not_reported(site, wall_top_m, reported):
+    # A detector guesses the hidden joints of a person it sees (occluded_keep), never a person it
+    # cannot see: behind a wall taller than the camera nobody is reported, even were every hidden
+    # joint guessed; over a wall 1 m high the upper body shows, and the person is reported.
+    import dataclasses
+
+    from superbody.edge.site import Obstacle
+
+    states, apps = _one_person_at(site, 4.1, 4.6, 0.0)
+    cam = site.camera("ne")
+    noise = NoiseModel(occluded_keep=1.0, joint_rate=(1.0,) * 17, view_quality_std=0.0, view_miss_prob=0.0,
+                       truncated_miss_prob=0.0, facing_visibility=None)
+    walled = dataclasses.replace(site, obstacles=(Obstacle("wall", (4.4, 3.6, 0.0), (4.5, 5.6, wall_top_m)),))  # no cabinet
+    views = render_views(states, apps, cam, np.random.default_rng(0), noise, walled)
+    assert len(views) == int(reported)
+    assert render_views(states, apps, cam, np.random.default_rng(0), noise, dataclasses.replace(site, obstacles=()))  # no wall: seen
+
+
 def test_colour_tells_people_apart_across_cameras(site):
     world = World(site, 3, seed=9)
     hists: dict[int, list] = {0: [], 1: [], 2: []}
