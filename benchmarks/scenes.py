@@ -31,6 +31,8 @@ changes to what the cameras report (``SCENES``):
   where the site file says (0.5 deg, 2 cm: ``Scene.calibration_error``);
 - l ``four-noisy``: k with a real detector's false positives: random partial ones (0.3 per
   camera frame) and a phantom in a corner of the floor that the first camera reports.
+- m ``door``: k's room with a doorway to a hallway no camera sees: people walk in and out,
+  and stand in or beside the doorway, seen in part by one or two cameras through it.
 
 Every camera runs at 15 fps, frames staggered within the frame period, through the host's pure
 core in-process (``host.aggregator.Aggregator``: decode, tracker, set S, estimator, filter):
@@ -129,7 +131,7 @@ from superbody.edge.messages import wire
 from superbody.edge.messages.observation import Observation, PersonView
 from superbody.edge.resources import model_path, site_path
 from superbody.edge.sim import Appearance, NoiseModel, PersonState, SimCamera, World, render_views, skeleton
-from superbody.edge.site import Site, load_site
+from superbody.edge.site import Obstacle, Site, load_site
 from superbody.host.aggregator import Aggregator, HostConfig
 from superbody.host.estimation import build_estimator, default_model
 from superbody.host.estimation.analytic import AnalyticEstimator
@@ -280,10 +282,24 @@ def scene_four_people_noisy() -> Scene:
     return dataclasses.replace(k, key="l", name="four-noisy", noise=NoiseModel(spurious_prob=0.3), phantom=(1.0, 3.0, -0.8))
 
 
+def scene_door() -> Scene:
+    # The four-person room with a doorway: a wall 2.5 m high along y = 4.0-4.15 m with a 1.6 m
+    # opening (x 1.35-2.95), and a hallway behind it (y 4.25-5.2) that no camera sees but through
+    # the opening. People walk in and out, stand in the doorway and just beside it: seen by one or
+    # two cameras, in part (the door's edges cut their bodies), or not at all.
+    k = scene_four_person_room()
+    x0, x1 = 1.35, 2.95
+    floor = ((0.7, 0.7), (3.6, 0.7), (3.6, 3.3), (x1, 3.3), (x1, 4.25), (3.6, 4.25), (3.6, 5.2), (0.7, 5.2), (0.7, 4.25),
+             (x0, 4.25), (x0, 3.3), (0.7, 3.3))
+    walls = (Obstacle("wall-west", (0.0, 4.0, 0.0), (x0, 4.15, 2.5)), Obstacle("wall-east", (x1, 4.0, 0.0), (4.3, 4.15, 2.5)))
+    site = dataclasses.replace(k.site, name="room5-door", floor=floor, obstacles=walls)
+    return dataclasses.replace(k, key="m", name="door", site=site)
+
+
 SCENES: Final[dict[str, Callable[[], Scene]]] = {
     "a": scene_apartment, "b": scene_six_cameras, "c": scene_low_cameras, "d": scene_crowd, "e": scene_same_colour,
     "f": scene_spurious, "g": scene_edges, "h": scene_no_colour, "i": scene_phantom, "j": scene_everything,
-    "k": scene_four_person_room, "l": scene_four_people_noisy,
+    "k": scene_four_person_room, "l": scene_four_people_noisy, "m": scene_door,
 }
 
 # A coat on a stand: grey, person-sized.
