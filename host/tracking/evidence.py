@@ -44,15 +44,16 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from superbody.edge.camera import Camera
 from superbody.edge.floor import visible
 from superbody.edge.site import Obstacle
-from superbody.host.tracking.motion import NS_PER_S
+from superbody.host.tracking.config import TrackerConfig
+from superbody.host.tracking.motion import NS_PER_S, predict_tracks
 from superbody.host.tracking.track import StampedView, Track
 
-__all__ = ["EDGE_MARGIN", "MERGE_AFTER_S", "TORSO_CENTRE_M", "clearly_sees", "corroborated", "too_close", "coincident", "seen_together", "one_body", "set_s_of_one_body", "sigmas_from", "squared_sigmas", "view_covariance"]
+__all__ = ["EDGE_MARGIN", "MERGE_AFTER_S", "TORSO_CENTRE_M", "clearly_sees", "corroborated", "too_close", "coincident", "seen_together", "off_track", "one_body", "set_s_of_one_body", "sigmas_from", "squared_sigmas", "view_covariance"]
 
 TORSO_CENTRE_M = 1.15  # height of a standing adult's torso centre (between hips 0.9 m and shoulders 1.4 m)
 EDGE_MARGIN = 0.1  # fraction of the image's width and height left out on each side
@@ -112,6 +113,22 @@ def seen_together(a: Track, b: Track) -> bool:
     detections in one frame are two people (or one person split by a detector, which the
     candidate rule catches), never one person whose views went to two tracks."""
     return any(b.views.get(cam) is not None and b.views[cam].stamp_ns == sv.stamp_ns for cam, sv in a.views.items())
+
+
+def off_track(tracks: Sequence[Track | None], xy: ArrayLike, stamps_ns: Sequence[int], cov: NDArray, cfg: TrackerConfig) -> tuple[NDArray[np.bool_], NDArray, NDArray]:
+    """Whether each point (B, 2), of covariance ``cov`` (B, 2, 2), lies where one body could not
+    stand: beyond ``same_body_sigmas`` combined 1-sigmas of its track's prediction at its stamp, as
+    a view is refused (False where there is no track or position, or the test is off); and those
+    predictions (B, 2) with their covariances (B, 2, 2), NaN where unknown."""
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    pred, pcov = np.full((len(xy), 2), np.nan), np.full((len(xy), 2, 2), np.nan)
+    idx = np.array([j for j, tr in enumerate(tracks) if tr is not None], dtype=np.intp)
+    if len(idx):  # one batch of predictions
+        pred[idx], pcov[idx] = predict_tracks([tracks[j] for j in idx], np.asarray(stamps_ns, dtype=np.int64)[idx], cfg.accel_std_mps2)  # type: ignore[misc]
+    g, C, sigmas = xy - pred, pcov + cov, cfg.same_body_sigmas
+    with np.errstate(invalid="ignore"):  # NaN: nothing to refuse
+        far = squared_sigmas(g[:, 0], g[:, 1], C[:, 0, 0], C[:, 0, 1], C[:, 1, 1]) > sigmas**2
+    return far & (sigmas > 0), pred, pcov
 
 
 def one_body(views: dict[str, StampedView], near_xy: NDArray | None, sigmas: float, across_m: float = math.inf) -> list[str]:

@@ -39,10 +39,10 @@ from superbody.edge.messages.observation import Observation, PersonView
 from superbody.edge.site import Site
 from superbody.host.tracking.association import Match, associate
 from superbody.host.tracking.config import TrackerConfig
-from superbody.host.tracking.evidence import clearly_sees, set_s_of_one_body, squared_sigmas, view_covariance
+from superbody.host.tracking.evidence import clearly_sees, off_track, set_s_of_one_body, view_covariance
 from superbody.host.tracking.lifecycle import Lifecycle, Newcomer
 from superbody.host.tracking.measure import FrameViews, measure
-from superbody.host.tracking.motion import NS_PER_S, fuse_positions, predict_tracks
+from superbody.host.tracking.motion import NS_PER_S, fuse_positions
 from superbody.host.tracking.track import StampedView, Track
 
 __all__ = ["Tracker"]
@@ -50,7 +50,7 @@ __all__ = ["Tracker"]
 _STATS = (
     "observations", "views", "wrong_site", "unknown_camera", "too_few_joints", "track_cap", "evicted_candidates", "too_few_joints_new",
     "no_ground_point", "no_signature", "unplaced_new", "suppressed", "duplicate_views", "matched", "new_candidates", "confirmed", "removed",
-    "dropped_candidates", "reidentified", "merged", "views_of_another_body", "feedback_refused",
+    "dropped_candidates", "reidentified", "merged", "views_of_another_body", "feedback_refused", "estimates_off_track",
 )
 
 
@@ -186,11 +186,10 @@ class Tracker:
     def set_positions(self, track_ids: Sequence[int], xy: ArrayLike, stamps_ns: Sequence[int], std_m: float = 0.1) -> NDArray[np.bool_]:
         """Feed back better positions for many tracks at once (one Kalman batch): ids (B,), xy (B, 2), stamps (B,).
 
-        A point is refused where one body could not stand (more than ``same_body_sigmas`` combined
-        1-sigmas from the track's prediction, counted in ``feedback_refused``), as a view is: an
-        estimate from a set S gone wrong, taken up by the host's pose filter, ran on ahead of the
-        person (1 m in 0.4 s, scene k, seed 13), and the track's gate then refused the person's
-        own views.
+        A point is refused where one body could not stand (``off_track``, counted in
+        ``feedback_refused``), as a view is: an estimate from a set S gone wrong, taken up by the
+        host's pose filter, ran on ahead of the person (1 m in 0.4 s, scene k, seed 13), and the
+        track's gate then refused the person's own views.
 
         Returns:
             (B,) bool, False where there is no such track, the point is not finite, or it was refused.
@@ -200,20 +199,20 @@ class Tracker:
             return np.zeros(len(xy), dtype=bool)
         tracks = [self._life.tracks.get(int(i)) for i in track_ids]
         ok = np.array([tr is not None for tr in tracks], dtype=bool) & np.isfinite(xy).all(axis=1)
-        sigmas, stamps = self.config.same_body_sigmas, np.asarray(stamps_ns, dtype=np.int64)
-        idx = np.flatnonzero(ok) if sigmas > 0 else np.empty(0, np.intp)
-        if len(idx):  # where one body could stand, as views are matched: one batch of predictions
-            pred, cov = predict_tracks([tracks[j] for j in idx], stamps[idx], self.config.accel_std_mps2)  # type: ignore[misc]
-            g, C = xy[idx] - pred, cov + std_m**2 * np.eye(2)  # (B, 2), (B, 2, 2)
-            with np.errstate(invalid="ignore"):  # NaN: no position yet, nothing to refuse
-                far = squared_sigmas(g[:, 0], g[:, 1], C[:, 0, 0], C[:, 0, 1], C[:, 1, 1]) > sigmas**2
-            ok[idx[far]] = False
-            self.stats["feedback_refused"] += int(far.sum())
+        R = np.tile(std_m**2 * np.eye(2), (len(xy), 1, 1))
+        far = ok & self.off_track(track_ids, xy, stamps_ns, R)[0]
+        ok &= ~far
+        self.stats["feedback_refused"] += int(far.sum())
         if ok.any():
             idx = np.flatnonzero(ok)
-            fuse_positions([tracks[i] for i in idx], xy[idx], np.tile(std_m**2 * np.eye(2), (len(idx), 1, 1)),  # type: ignore[misc]
-                            stamps[idx], self.config.accel_std_mps2)
+            fuse_positions([tracks[i] for i in idx], xy[idx], R[idx], np.asarray(stamps_ns, dtype=np.int64)[idx],  # type: ignore[misc]
+                           self.config.accel_std_mps2)
         return ok
+
+    def off_track(self, track_ids: Sequence[int], xy: ArrayLike, stamps_ns: Sequence[int], cov: NDArray) -> tuple[NDArray[np.bool_], NDArray, NDArray]:
+        """Which points (B, 2) of covariance ``cov`` (B, 2, 2) lie where one body could not stand
+        (``evidence.off_track``), and the tracks' predictions (B, 2) and covariances (B, 2, 2)."""
+        return off_track([self._life.tracks.get(int(i)) for i in track_ids], xy, stamps_ns, cov, self.config)
 
     def prune(self, now_ns: int) -> list[Track]:
         """Remove tracks unseen for ``remove_after_s``, and the younger of two confirmed tracks that
