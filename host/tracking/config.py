@@ -78,8 +78,9 @@ class TrackerConfig:
         same_body_across_m: a view's ground point's 1-sigma across its camera's line of sight,
             for that test and for the tracks' position filters (``host.tracking.motion``; along
             it, the point's own sigma: a range from a body part's assumed height). The bearing
-            comes from pixels: what is left is the calibration's and the detector's error. 0.08: dev.json's real sets (3 cameras) then have a view beyond
-            3 sigmas in 0.3% of them; at 0.05, in 3.3%, and the live figures get worse.
+            comes from pixels: what is left is the calibration's and the detector's error.
+            0.08: dev.json's real sets (3 cameras) then have a view beyond 3 sigmas in 0.3% of
+            them; at 0.05, in 3.3%, and the live figures get worse.
     """
 
     confirm_after_s: float = 2.0

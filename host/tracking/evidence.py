@@ -122,13 +122,14 @@ def off_track(tracks: Sequence[Track | None], xy: ArrayLike, stamps_ns: Sequence
     predictions (B, 2) with their covariances (B, 2, 2), NaN where unknown."""
     xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
     pred, pcov = np.full((len(xy), 2), np.nan), np.full((len(xy), 2, 2), np.nan)
+    sigmas = cfg.same_body_sigmas
     idx = np.array([j for j, tr in enumerate(tracks) if tr is not None], dtype=np.intp)
-    if len(idx):  # one batch of predictions
-        pred[idx], pcov[idx] = predict_tracks([tracks[j] for j in idx], np.asarray(stamps_ns, dtype=np.int64)[idx], cfg.accel_std_mps2)  # type: ignore[misc]
-    g, C, sigmas = xy - pred, pcov + cov, cfg.same_body_sigmas
+    if sigmas <= 0 or not len(idx):  # the test is off, or no track: nothing to refuse
+        return np.zeros(len(xy), dtype=bool), pred, pcov
+    pred[idx], pcov[idx] = predict_tracks([tracks[j] for j in idx], np.asarray(stamps_ns, dtype=np.int64)[idx], cfg.accel_std_mps2)  # type: ignore[misc]
+    g, C = xy - pred, pcov + cov
     with np.errstate(invalid="ignore"):  # NaN: nothing to refuse
-        far = squared_sigmas(g[:, 0], g[:, 1], C[:, 0, 0], C[:, 0, 1], C[:, 1, 1]) > sigmas**2
-    return far & (sigmas > 0), pred, pcov
+        return squared_sigmas(g[:, 0], g[:, 1], C[:, 0, 0], C[:, 0, 1], C[:, 1, 1]) > sigmas**2, pred, pcov
 
 
 def one_body(views: dict[str, StampedView], near_xy: NDArray | None, sigmas: float, across_m: float = math.inf) -> list[str]:

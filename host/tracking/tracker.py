@@ -200,7 +200,7 @@ class Tracker:
         tracks = [self._life.tracks.get(int(i)) for i in track_ids]
         ok = np.array([tr is not None for tr in tracks], dtype=bool) & np.isfinite(xy).all(axis=1)
         R = np.tile(std_m**2 * np.eye(2), (len(xy), 1, 1))
-        far = ok & self.off_track(track_ids, xy, stamps_ns, R)[0]
+        far = ok & off_track(tracks, xy, stamps_ns, R, self.config)[0]
         ok &= ~far
         self.stats["feedback_refused"] += int(far.sum())
         if ok.any():
