@@ -137,7 +137,7 @@ def median_colour_distance(hists: NDArray, history: NDArray, counts: NDArray) ->
     return med
 
 
-def associate(t: int, tracks: list[Track], views: FrameViews, cfg: TrackerConfig) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
+def associate(t: int, tracks: list[Track], views: FrameViews, cfg: TrackerConfig) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray, NDArray]:
     """Cost, feasibility and joint assignment of a frame's K views to M tracks at time ``t``.
 
     The cost of a pair, in units of a negative log likelihood, is the sum of three terms:
@@ -171,16 +171,18 @@ def associate(t: int, tracks: list[Track], views: FrameViews, cfg: TrackerConfig
         views: the frame's views (``host.tracking.measure``).
 
     Returns:
-        ``(rows, cols, colour_d, geo_d, near)``: matched view and track indices, the (K, M)
-        colour and ground distances (NaN where unknown), and (K, M) whether each view's
-        ground point lies inside each track's gate (all False without geometry).
+        ``(rows, cols, colour_d, geo_d, near, body)``: matched view and track indices, the (K, M)
+        colour and ground distances (NaN where unknown), (K, M) whether each view's ground point
+        lies inside each track's gate, and (K, M) whether it also lies where that track's body
+        could stand (the one-body test; vouched for or not); both all False without geometry.
     """
     amps, has_colour, ground, sigma, has_ground = views.amps, views.has_colour, views.ground, views.sigma, views.has_ground
     k, m = len(amps), len(tracks)
     geo_d = np.full((k, m), np.nan)
     near = np.zeros((k, m), dtype=bool)
+    body = near
     if m == 0:
-        return np.empty(0, np.intp), np.empty(0, np.intp), np.full((k, 0), np.nan), geo_d, near
+        return np.empty(0, np.intp), np.empty(0, np.intp), np.full((k, 0), np.nan), geo_d, near, body
     q = cfg.history_q
     rows_of = [tr.colour_rows for tr in tracks]
     history = np.array([a for a, _ in rows_of]).reshape(m * q, BINS)  # (M*Q, B)
@@ -211,4 +213,4 @@ def associate(t: int, tracks: list[Track], views: FrameViews, cfg: TrackerConfig
         vouched = clearly_best(colour_d, REID_MARGIN) | (geo_known & (sigma < cfg.gate_m)[:, None])
     cost -= np.log(np.array([tr.support for tr in tracks]))[None, :]
     rows, cols = assign(cost, feasible & vouched)
-    return rows, cols, colour_d, geo_d, near
+    return rows, cols, colour_d, geo_d, near, body

@@ -63,9 +63,9 @@ class TrackerConfig:
         reid_speed_mps: ... and if the remembered person, walking at this speed, could have
             reached (within ``gate_m``) where the new one stands.
         confirm_min_support: a candidate is confirmed only if it was matched in at least this
-            share of the frames of cameras that clearly saw where it stood (``host.tracking.evidence``:
-            a false positive one camera reports where the others see nothing is not a person;
-            0 turns the rule off).
+            share of the frames of cameras that clearly saw where it stood, less those that
+            glimpsed someone who could be it (``host.tracking.evidence``: a false positive one
+            camera reports where the others see nothing is not a person; 0 turns the rule off).
         min_separation_m: a candidate closer than this to a confirmed person is that person, not
             a newcomer, and two confirmed tracks that stay this close are merged
             (``host.tracking.evidence``; 0 turns the rule off).

@@ -110,8 +110,10 @@ class Tracker:
         if views is None or not len(views.idx):
             self._count_chances(obs.camera, tracks, np.empty(0, np.intp))  # a frame that sees nobody is evidence too
         else:
-            rows, cols, colour_d, geo_d, near = associate(t, tracks, views, self.config)
-            self._count_chances(obs.camera, tracks, cols)
+            rows, cols, colour_d, geo_d, near, body = associate(t, tracks, views, self.config)
+            left = np.ones(len(views.idx), dtype=bool)
+            left[rows] = False
+            self._count_chances(obs.camera, tracks, cols, glimpsed=np.asarray(body[left].any(axis=0)))
             fused: list[tuple[Track, int]] = []
             for r, c in zip(rows, cols, strict=True):
                 tr, i = tracks[c], int(views.idx[r])
@@ -143,15 +145,16 @@ class Tracker:
             matches[i] = Match(i, tr.id, "created")
         return fused
 
-    def _count_chances(self, camera: str, tracks: list[Track], cols: NDArray) -> None:
-        """Each placed candidate's chance to be seen in this frame, and whether it was (``host.tracking.evidence``)."""
+    def _count_chances(self, camera: str, tracks: list[Track], cols: NDArray, glimpsed: NDArray | None = None) -> None:
+        """Each placed candidate's chance to be seen in this frame, and whether it was (``host.tracking.evidence``);
+        no chance where a view no track took could be it (``glimpsed``, (M,))."""
         idx = [j for j, tr in enumerate(tracks) if tr.state == "candidate" and tr.motion is not None]
         if not idx:
             return
         seen = clearly_sees(self._cameras[camera], np.array([tracks[j].position for j in idx]), self.site.obstacles)
         matched = set(cols.tolist())
         for j, s in zip(idx, seen, strict=True):
-            tracks[j].count_chance(hit=j in matched, seen=bool(s))
+            tracks[j].count_chance(hit=j in matched, seen=bool(s) and not (glimpsed is not None and glimpsed[j]))
 
     def _record(self, tr: Track, obs: Observation, t: int, views: FrameViews, r: int) -> None:
         """Record a view (row ``r`` of ``views``) matched to (or starting) ``tr``; confirm it when its time has come."""

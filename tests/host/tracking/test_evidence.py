@@ -8,6 +8,7 @@ import pytest
 
 from superbody.edge.body import NUM_KEYPOINTS
 from superbody.edge.messages.observation import Observation
+from superbody.edge.site import Site
 from superbody.host.tracking.config import TrackerConfig
 from superbody.host.tracking.evidence import EDGE_MARGIN, MERGE_AFTER_S, clearly_sees, coincident, too_close
 from superbody.host.tracking.track import Track
@@ -473,3 +474,44 @@ def test_a_candidate_its_cameras_do_not_report_pays_for_each_view_by_how_rarely_
     assert ghost.support == pytest.approx(1 / 20)
     (m,) = tracker.update(_colourless(C1, t + 30_000_000, [tuple(0.15 * across)]))
     assert m.track_id == p.id
+
+
+_NEAR_A, _NEAR_B, _FAR = make_camera("near-a", (3.5, 0.0, 2.6)), make_camera("near-b", (0.0, 3.5, 2.6)), make_camera("far", (-10.0, -1.0, 2.6))
+_ROOM = Site(name=SITE.name, cameras=(_NEAR_A, _NEAR_B, _FAR), floor=((-11.0, -11.0), (11.0, -11.0), (11.0, 11.0), (-11.0, 11.0)))
+
+
+def _glimpse(cam, t: int, xy: tuple[float, float]) -> Observation:
+    """``cam`` reports a person at ``xy`` by their head and left shoulder alone (hidden behind
+    someone else, who is not in this test), without colour."""
+    from superbody.edge.messages.observation import empty_histogram
+    from tests.host.tracking.test_tracker import person_view
+
+    v = person_view(cam, *xy, 0.0, empty_histogram())
+    kp = np.full_like(v.keypoints, np.nan)
+    kp[[0, 1, 2, 5]] = v.keypoints[[0, 1, 2, 5]]
+    bbox = np.array([*np.nanmin(kp[:, :2], axis=0), *np.nanmax(kp[:, :2], axis=0)], np.float32)
+    return Observation(SITE.name, cam.id, t // 1_000_000, t, cam.width, cam.height, (type(v)(kp, bbox, v.histogram),))
+
+
+@pytest.mark.parametrize("far_reports, confirmed", [(None, False), ((0.0, 0.0), True), ((0.0, 1.5), False)])
+def test_a_camera_that_glimpses_a_candidate_it_cannot_place_does_not_count_against_them(far_reports, confirmed):
+    """Scene k, seed 40 (12 s): a person stood behind another from one camera, which reported them
+    by 3-4 joints (a head and a shoulder), a ground point unsure by 1.3-2 m: too vague to be
+    matched, so each such frame counted as that camera not seeing them, and with another camera
+    that did not see them at all they were confirmed 3 s late. Here near-a reports the person in
+    every frame, near-b in 1 of 3, and the far camera (10 m off, ground points unsure by 1 m):
+    nothing, a glimpse of them, or a glimpse of someone 1.5 m to the side (across its line of
+    sight, where a ground point is sure). Only the glimpse of them is no chance against them."""
+    tracker = Tracker(_ROOM)
+    frames = {cam.id: 0 for cam in _ROOM.cameras}
+    for cam, t in schedule(3.0, _ROOM.cameras):
+        frames[cam.id] += 1
+        if cam is _FAR:
+            obs = _glimpse(cam, t, far_reports) if far_reports else _colourless(cam, t, [])
+        else:
+            obs = _colourless(cam, t, [(0.0, 0.0)] if cam is _NEAR_A or frames[cam.id] % 3 == 1 else [])
+        matches = tracker.update(obs)
+        if cam is _FAR and far_reports:
+            assert [m.status for m in matches] == ["ignored"]  # too vague to match, too few joints to start anyone
+    (cand,) = tracker.tracks
+    assert (cand.state == "confirmed") == confirmed
