@@ -8,7 +8,11 @@ fits the site. For one person's views:
    (edge.body.TYPICAL_HEIGHT_M);
 2. position: the mean of the torso joints (shoulders, hips) on the floor, or of all joints if
    no torso joint was seen, leaving out joints one camera placed on a ray that grazes their
-   plane (``MAX_PLACEMENT_STD_M``) unless nothing else is left;
+   plane (``MAX_PLACEMENT_STD_M``) unless nothing else is left. From one camera, the floor
+   point of the view's surest body part instead (``host.tracking.ground``, where the tracker
+   places the same view): a person seen through a doorway by a camera 1 m up showed their
+   shoulders and ankles; the shoulders, 0.4 m above the camera, put them 0.6-1.4 m off along its
+   line of sight, the ankles within 0.2 m (scene m, seed 1);
 3. yaw: perpendicular to the left-right shoulder and hip lines (pointing to the body's front),
    averaged as vectors; with neither pair, from the nose against the ears/eyes; else 0. Each
    line's two ends come from the same cameras, those that saw both (``pair_points``): a shoulder
@@ -32,6 +36,7 @@ from superbody.edge.camera import intersect_plane, pixel_to_ray
 from superbody.edge.messages.observation import PersonView
 from superbody.edge.site import Site
 from superbody.host.estimation.estimator import Estimates
+from superbody.host.tracking.ground import ground_points
 
 __all__ = ["AnalyticEstimator", "GeometrySigmas", "triangulate", "joints_3d", "pair_points", "YAW_STD_NO_CUE", "NO_CUE", "HEAD", "PAIR",
            "HEIGHT_STD_M", "MAX_PLACEMENT_STD_M"]
@@ -152,7 +157,7 @@ class AnalyticEstimator:
         sigmas: the geometry's measured 1-sigmas, reported with each pose
             (``estimate_detailed``) so that the temporal filter weighs a pose as it deserves;
             None: no sigmas (the filter then uses its defaults, ``FilterConfig.meas_std_xy_m``
-            and ``meas_std_yaw_rad``, for every pose).
+            and ``meas_std_yaw_rad``), but for the position from one view (below).
     """
 
     def __init__(self, site: Site, sigmas: GeometrySigmas | None = None):
@@ -161,12 +166,17 @@ class AnalyticEstimator:
 
     def estimate_detailed(self, view_sets: Sequence[Mapping[str, PersonView]]) -> Estimates:
         """Poses, their 1-sigmas (NaN without ``sigmas``: the filter's defaults) and the source
-        "analytic". A yaw from no cue at all has ``YAW_STD_NO_CUE`` either way."""
-        pose, cue = self.estimate_with_cues(view_sets)
+        "analytic". A yaw from no cue at all has ``YAW_STD_NO_CUE`` either way, and a position
+        from one view is no surer than its ground point (``host.tracking.ground``'s sigma, per
+        axis): the calibration's sigma is per camera count, and a box's bottom edge from a view
+        of two wrists and a knee is not the ankles of a whole one (scene g, seed 1: such a pose,
+        reported at 0.13 m, 0.6 m off, pulled the person's track off them)."""
+        pose, cue, place_std = self._estimate(view_sets)
         if self.sigmas is None:
             std = np.full(pose.shape, np.nan)
         else:
             std = self.sigmas.analytic_sigmas(np.array([len(v) for v in view_sets], dtype=np.int64), cue == PAIR).reshape(pose.shape)
+        std[:, :2] = np.fmax(std[:, :2], place_std[:, None])  # one view: no surer than its ground point
         std[cue == NO_CUE, 2] = YAW_STD_NO_CUE
         return Estimates(pose, std, ("analytic",) * len(pose))
 
@@ -182,20 +192,31 @@ class AnalyticEstimator:
 
     def estimate_with_cues(self, view_sets: Sequence[Mapping[str, PersonView]]) -> tuple[NDArray[np.float64], NDArray[np.int8]]:
         """(B, 3) poses, and (B,) what each yaw came from: ``PAIR``, ``HEAD`` or ``NO_CUE``."""
+        pose, cue, _ = self._estimate(view_sets)
+        return pose, cue
+
+    def _estimate(self, view_sets: Sequence[Mapping[str, PersonView]]) -> tuple[NDArray[np.float64], NDArray[np.int8], NDArray[np.float64]]:
         out = np.zeros((len(view_sets), 3))
         cue = np.zeros(len(view_sets), np.int8)
+        place_std = np.full(len(view_sets), np.nan)
         for i, views in enumerate(view_sets):
-            out[i], cue[i] = self._one(views)
-        return out, cue
+            out[i], cue[i], place_std[i] = self._one(views)
+        return out, cue, place_std
 
-    def _one(self, views: Mapping[str, PersonView]) -> tuple[NDArray[np.float64], int]:
+    def _one(self, views: Mapping[str, PersonView]) -> tuple[NDArray[np.float64], int, float]:
         j, sigma = _joints_3d(views, self.site)
         seen = ~np.isnan(j[:, 0])
+        place_std = math.nan
         if not seen.any():
-            return np.array([np.nan, np.nan, 0.0]), NO_CUE
+            return np.array([np.nan, np.nan, 0.0]), NO_CUE, place_std
         torso = np.array([t for t in body.TORSO if seen[t]] or np.flatnonzero(seen))
         sure = torso[sigma[torso] <= MAX_PLACEMENT_STD_M]  # a ray that grazes its plane places nothing
         centre = j[sure if len(sure) else torso[[np.argmin(sigma[torso])]], :2].mean(0)
+        if len(views) == 1:
+            ((cam_id, view),) = views.items()
+            ground, ground_std, _ = ground_points(view.keypoints[None], np.asarray(view.bbox)[None], self.site.camera(cam_id))
+            if np.isfinite(ground_std[0]):
+                centre, place_std = ground[0], float(ground_std[0])
         facing = np.zeros(2)
         for left, right in _PAIRS:
             ends = pair_points(views, self.site, left, right, j)
@@ -209,4 +230,4 @@ class AnalyticEstimator:
                 facing = j[body.NOSE, :2] - j[head, :2].mean(0)
                 cue = HEAD if facing.any() else NO_CUE
         yaw = math.atan2(facing[1], facing[0]) if facing.any() else 0.0
-        return np.array([centre[0], centre[1], yaw]), cue
+        return np.array([centre[0], centre[1], yaw]), cue, place_std

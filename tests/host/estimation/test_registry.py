@@ -13,6 +13,7 @@ import pytest
 from superbody.edge.site import dump_site, load_site
 from superbody.host.estimation import build_estimator, default_model
 from superbody.host.estimation.analytic import NO_CUE, PAIR, AnalyticEstimator
+from superbody.host.tracking.ground import ground_points
 from superbody.models.data.simdata import SimDataConfig, generate
 from tests.conftest import ROOT, WTF_SITE, free_port
 
@@ -82,6 +83,11 @@ def test_geometry_reports_the_sigmas_of_the_sites_calibration():
     cams = np.array([len(v) for v in sets])
     want = est.sigmas.analytic_sigmas(cams, cue == PAIR)
     want[cue == NO_CUE, 2] = np.inf  # a yaw from nothing says nothing, calibrated or not
+    for i in np.flatnonzero(cams == 1):  # one view: no surer than its ground point
+        ((cam, view),) = sets[i].items()
+        ground_std = ground_points(view.keypoints[None], np.asarray(view.bbox)[None], site.camera(cam))[1][0]
+        want[i, :2] = np.fmax(want[i, :2], ground_std)
+    assert (got.std[cams == 1, :2] > est.sigmas.analytic_sigmas(cams, cue == PAIR)[cams == 1, :2]).any()
     np.testing.assert_array_equal(got.std, want)
     assert np.isfinite(got.std[cue != NO_CUE]).all() and got.source == ("analytic",) * len(sets)
     assert len(set(cams.tolist())) > 1 and len({tuple(r) for r in got.std.tolist()}) > 1  # one row per camera count

@@ -255,7 +255,10 @@ def test_views_of_different_instants_count_at_their_mean_time_and_the_pose_keeps
     # published pose does not trail the walk by that much. Measured: 20 ms and 16 ms behind with
     # the filter's old default sigmas (0.1 m, 10 deg), 11 and 6 ms ahead with today's (0.03 m,
     # 4 deg: it follows the views more closely, and predicts on from the mean instant); stamped
-    # at the newest view instead (before), 49 and 61 ms behind.
+    # at the newest view instead (before), 49 and 61 ms behind. Since a pose from one view (3 in
+    # 10 here) is placed by its ground point, 20 and 28 ms behind: in this simulated walk the
+    # point between the ankles trails the torso (one-view poses 54 mm behind it along the walk,
+    # per frame; the torso's joints at their typical heights were 12-31 mm ahead).
     clean = NoiseModel(pixel_noise_px=0.0, swap_prob=0.0, view_miss_prob=0.0)
     est = AnalyticEstimator(SITE)
     for seed in (1, 2):
@@ -269,7 +272,7 @@ def test_views_of_different_instants_count_at_their_mean_time_and_the_pose_keeps
         assert moving.sum() >= 60
         ahead = np.einsum("ij,ij->i", rep.poses[:, :2] - truth[:, :2], v / np.maximum(speed, 1e-9)[:, None])  # (N,) m
         lag_s = -ahead[moving].sum() / speed[moving].sum()
-        assert abs(lag_s) < 0.025, (seed, lag_s)
+        assert abs(lag_s) < 0.035, (seed, lag_s)
 
 
 def test_simulated_recording_rejects_bad_arguments():
