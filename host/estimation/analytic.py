@@ -196,27 +196,33 @@ class AnalyticEstimator:
         return pose, cue
 
     def _estimate(self, view_sets: Sequence[Mapping[str, PersonView]]) -> tuple[NDArray[np.float64], NDArray[np.int8], NDArray[np.float64]]:
-        out = np.zeros((len(view_sets), 3))
-        cue = np.zeros(len(view_sets), np.int8)
-        place_std = np.full(len(view_sets), np.nan)
+        """Poses, cues, and each one-view position's ground-point sigma (NaN for the others)."""
+        n = len(view_sets)
+        out, cue = np.zeros((n, 3)), np.zeros(n, np.int8)
+        ground, place_std = np.full((n, 2), np.nan), np.full(n, np.nan)
+        by_camera: dict[str, list[int]] = {}  # the one-view sets, by their camera: one ground_points call each
         for i, views in enumerate(view_sets):
-            out[i], cue[i], place_std[i] = self._one(views)
+            if len(views) == 1:
+                by_camera.setdefault(next(iter(views)), []).append(i)
+        for cam_id, idx in by_camera.items():
+            seen = [view_sets[i][cam_id] for i in idx]
+            ground[idx], place_std[idx], _ = ground_points(np.array([v.keypoints for v in seen]), np.array([v.bbox for v in seen]),
+                                                           self.site.camera(cam_id))
+        for i, views in enumerate(view_sets):
+            out[i], cue[i] = self._one(views, ground[i])
         return out, cue, place_std
 
-    def _one(self, views: Mapping[str, PersonView]) -> tuple[NDArray[np.float64], int, float]:
+    def _one(self, views: Mapping[str, PersonView], ground: NDArray[np.float64]) -> tuple[NDArray[np.float64], int]:
+        """One person's pose and cue; ``ground`` (2,): the floor point of their one view (NaN: none, or more views)."""
         j, sigma = _joints_3d(views, self.site)
         seen = ~np.isnan(j[:, 0])
-        place_std = math.nan
         if not seen.any():
-            return np.array([np.nan, np.nan, 0.0]), NO_CUE, place_std
+            return np.array([np.nan, np.nan, 0.0]), NO_CUE
         torso = np.array([t for t in body.TORSO if seen[t]] or np.flatnonzero(seen))
         sure = torso[sigma[torso] <= MAX_PLACEMENT_STD_M]  # a ray that grazes its plane places nothing
         centre = j[sure if len(sure) else torso[[np.argmin(sigma[torso])]], :2].mean(0)
-        if len(views) == 1:
-            ((cam_id, view),) = views.items()
-            ground, ground_std, _ = ground_points(view.keypoints[None], np.asarray(view.bbox)[None], self.site.camera(cam_id))
-            if np.isfinite(ground_std[0]):
-                centre, place_std = ground[0], float(ground_std[0])
+        if np.isfinite(ground).all():  # one view: its surest body part (module docstring)
+            centre = ground
         facing = np.zeros(2)
         for left, right in _PAIRS:
             ends = pair_points(views, self.site, left, right, j)
@@ -230,4 +236,4 @@ class AnalyticEstimator:
                 facing = j[body.NOSE, :2] - j[head, :2].mean(0)
                 cue = HEAD if facing.any() else NO_CUE
         yaw = math.atan2(facing[1], facing[0]) if facing.any() else 0.0
-        return np.array([centre[0], centre[1], yaw]), cue, place_std
+        return np.array([centre[0], centre[1], yaw]), cue
