@@ -111,7 +111,7 @@ class Tracker:
             self._count_chances(obs.camera, tracks, np.empty(0, np.intp))  # a frame that sees nobody is evidence too
         else:
             rows, cols, colour_d, geo_d, near, body = associate(t, tracks, views, self.config)
-            left = np.ones(len(views.idx), dtype=bool)
+            left = np.ones(len(views.idx), dtype=bool)  # the views no track took
             left[rows] = False
             self._count_chances(obs.camera, tracks, cols, glimpsed=np.asarray(body[left].any(axis=0)))
             fused: list[tuple[Track, int]] = []
@@ -121,19 +121,17 @@ class Tracker:
                 fused.append((tr, int(r)))
                 matches[i] = Match(i, tr.id, "matched", float(colour_d[r, c]), float(geo_d[r, c]))
                 st["matched"] += 1
-            fused += self._births(obs, t, views, tracks, rows, cols, near, matches)
+            fused += self._births(obs, t, views, tracks, left, cols, near, matches)
             self._fuse(fused, views, t)
         return [Match(i, None, "ignored") if m is None else m for i, m in enumerate(matches)]
 
-    def _births(self, obs: Observation, t: int, views: FrameViews, tracks: list[Track], rows: NDArray, cols: NDArray,
+    def _births(self, obs: Observation, t: int, views: FrameViews, tracks: list[Track], left: NDArray, cols: NDArray,
                 near: NDArray, matches: list[Match | None]) -> list[tuple[Track, int]]:
-        """A candidate from each view no track took, where the birth rules allow; the (track, view row) pairs to fuse."""
-        taken = np.zeros(len(views.idx), dtype=bool)
-        taken[rows] = True
+        """A candidate from each view no track took (``left``), where the birth rules allow; the (track, view row) pairs to fuse."""
         unseen = np.ones(len(tracks), dtype=bool)  # tracks this frame did not see
         unseen[cols] = False
         fused: list[tuple[Track, int]] = []
-        for r in np.flatnonzero(~taken):
+        for r in np.flatnonzero(left):
             i = int(views.idx[r])
             newcomer = Newcomer(bool(views.has_colour[r]), bool(views.has_ground[r]), float(views.sigma[r]), int(views.n_joints[i]),
                                 bool((near[r] & unseen).any()))
