@@ -218,11 +218,12 @@ class AnalyticEstimator:
         seen = ~np.isnan(j[:, 0])
         if not seen.any():
             return np.array([np.nan, np.nan, 0.0]), NO_CUE
-        torso = np.array([t for t in body.TORSO if seen[t]] or np.flatnonzero(seen))
-        sure = torso[sigma[torso] <= MAX_PLACEMENT_STD_M]  # a ray that grazes its plane places nothing
-        centre = j[sure if len(sure) else torso[[np.argmin(sigma[torso])]], :2].mean(0)
         if np.isfinite(ground).all():  # one view: its surest body part (module docstring)
             centre = ground
+        else:
+            torso = np.array([t for t in body.TORSO if seen[t]] or np.flatnonzero(seen))
+            sure = torso[sigma[torso] <= MAX_PLACEMENT_STD_M]  # a ray that grazes its plane places nothing
+            centre = j[sure if len(sure) else torso[[np.argmin(sigma[torso])]], :2].mean(0)
         facing = np.zeros(2)
         for left, right in _PAIRS:
             ends = pair_points(views, self.site, left, right, j)

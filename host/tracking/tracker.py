@@ -150,9 +150,11 @@ class Tracker:
         if not idx:
             return
         seen = clearly_sees(self._cameras[camera], np.array([tracks[j].position for j in idx]), self.site.obstacles)
+        if glimpsed is not None:
+            seen &= ~glimpsed[idx]
         matched = set(cols.tolist())
         for j, s in zip(idx, seen, strict=True):
-            tracks[j].count_chance(hit=j in matched, seen=bool(s) and not (glimpsed is not None and glimpsed[j]))
+            tracks[j].count_chance(hit=j in matched, seen=bool(s))
 
     def _record(self, tr: Track, obs: Observation, t: int, views: FrameViews, r: int) -> None:
         """Record a view (row ``r`` of ``views``) matched to (or starting) ``tr``; confirm it when its time has come."""
