@@ -279,7 +279,8 @@ class Aggregator:
             var = np.eye(2) * np.where(std[:, :2] > 0, std[:, :2], np.nan)[:, None, :] ** 2  # (B, 2, 2) diagonal
             off, pred, pcov = self.tracker.off_track(tids, pose[:, :2], measured, var)
             pose[off, :2], std[off, :2] = pred[off], np.sqrt(np.diagonal(pcov[off], axis1=1, axis2=2))
-            self.tracker.stats["estimates_off_track"] += int(off.sum())
+            if off.any():
+                self.rejected["estimate_off_track"] += int(off.sum())
             update_many(filters, measured, pose, std)
             fps = predict_many(filters, stamps)
             # Fed back to the tracker, but not where the position was the track's own.

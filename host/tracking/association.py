@@ -144,7 +144,7 @@ def associate(t: int, tracks: list[Track], views: FrameViews, cfg: TrackerConfig
 
     - colour: the colour distance over ``d_max`` (the paper's rule: feasible below it);
       ``_UNKNOWN_COLOUR_COST`` for an empty histogram;
-    - place (with ``use_geometry``): ``geometry_weight`` times ``s^2 / 2 + log(det C / det V) / 2``,
+    - place (with ``use_geometry``): ``s^2 / 2 + log(det C / det V) / 2``,
       ``s`` the combined sigmas between the view's ground point and the track's prediction
       (``evidence.sigmas_from``: the view sure across its camera's line of sight and unsure along
       it, the prediction's sigma added), C that combined covariance and V the view's own. The
@@ -209,7 +209,7 @@ def associate(t: int, tracks: list[Track], views: FrameViews, cfg: TrackerConfig
             if cfg.same_body_sigmas > 0:  # and where one body could stand: the set S test, per view
                 body = near & (sig <= cfg.same_body_sigmas)
             feasible &= ~geo_known | body
-            cost += cfg.geometry_weight * np.where(geo_known, 0.5 * sig**2 + spread, _UNKNOWN_PLACE_COST)
+            cost += np.where(geo_known, 0.5 * sig**2 + spread, _UNKNOWN_PLACE_COST)
         vouched = clearly_best(colour_d, REID_MARGIN) | (geo_known & (sigma < cfg.gate_m)[:, None])
     cost -= np.log(np.array([tr.support for tr in tracks]))[None, :]
     rows, cols = assign(cost, feasible & vouched)

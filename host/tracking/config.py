@@ -41,9 +41,6 @@ class TrackerConfig:
             and a candidate started from them is usually a duplicate of someone.
         confirm_max_gap_s: a candidate unseen longer than this restarts its confirmation clock,
             so "2 s of matches" means 2 s of steady matches.
-        geometry_weight: weight of the place term of the assignment cost (a negative log
-            likelihood: ``association.associate``) against the colour term (a colour distance
-            over ``d_max``); 0 matches on colour alone within the gates.
         accel_std_mps2: how fast a person's walking velocity may change, for the position
             prediction: continuous white acceleration of spectral density ``accel_std_mps2^2``
             (``host.filtering.kalman.continuous_accel_noise``), so the velocity wanders by this
@@ -58,8 +55,6 @@ class TrackerConfig:
         reid_window_s: a removed person is remembered this long for re-identification
             (``host.tracking.reid``; a person unseen for over ``confirm_max_gap_s`` is a
             candidate for it too; 0 turns re-identification off, both kinds).
-        reid_d_max: a new person is re-identified as a remembered one only if the median
-            Bhattacharyya distance between their colour histories is below this.
         reid_speed_mps: ... and if the remembered person, walking at this speed, could have
             reached (within ``gate_m``) where the new one stands.
         confirm_min_support: a candidate is confirmed only if it was matched in at least this
@@ -92,11 +87,9 @@ class TrackerConfig:
     min_joints: int = 3
     min_joints_new: int = 6
     confirm_max_gap_s: float = 1.0
-    geometry_weight: float = 1.0
     accel_std_mps2: float = 1.0
     max_tracks: int = 64
     reid_window_s: float = 30.0
-    reid_d_max: float = 0.6
     reid_speed_mps: float = 1.5
     confirm_min_support: float = 0.5
     min_separation_m: float = 0.3
@@ -114,11 +107,9 @@ class TrackerConfig:
         _check("min_joints", self.min_joints, 0, NUM_KEYPOINTS, integer=True)
         _check("min_joints_new", self.min_joints_new, 0, NUM_KEYPOINTS, integer=True)
         _check("confirm_max_gap_s", self.confirm_max_gap_s, 0.0, 600.0, lo_open=True)
-        _check("geometry_weight", self.geometry_weight, 0.0, 100.0)
         _check("accel_std_mps2", self.accel_std_mps2, 0.0, 100.0, lo_open=True)
         _check("max_tracks", self.max_tracks, 1, MAX_PEOPLE, integer=True)
         _check("reid_window_s", self.reid_window_s, 0.0, 3600.0)
-        _check("reid_d_max", self.reid_d_max, 0.0, 1.0, lo_open=True)
         _check("reid_speed_mps", self.reid_speed_mps, 0.0, 100.0)
         _check("confirm_min_support", self.confirm_min_support, 0.0, 1.0)
         _check("min_separation_m", self.min_separation_m, 0.0, 2.0)

@@ -6,7 +6,7 @@ keep landing inside a candidate's gate. Two physical facts tell them from people
 
 - **A person is seen by every camera that clearly sees where they stand** (negative evidence).
   Each frame of a camera that clearly sees a candidate's position (``clearly_sees``: the torso
-  centre, 1.15 m up, inside the image less ``EDGE_MARGIN`` of its size on each side, in front
+  centre, 1.17 m up, inside the image less ``EDGE_MARGIN`` of its size on each side, in front
   of the camera, within the detector's range, no obstacle of the site in between) is a chance
   to see it; a candidate is
   confirmed only if at least ``TrackerConfig.confirm_min_support`` of its chances since its
@@ -52,6 +52,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from superbody.edge.body import LEFT_HIP, LEFT_SHOULDER, TYPICAL_HEIGHT_M
 from superbody.edge.camera import Camera
 from superbody.edge.floor import visible
 from superbody.edge.site import Obstacle
@@ -61,7 +62,8 @@ from superbody.host.tracking.track import StampedView, Track
 
 __all__ = ["EDGE_MARGIN", "MERGE_AFTER_S", "TORSO_CENTRE_M", "clearly_sees", "corroborated", "too_close", "coincident", "seen_together", "off_track", "one_body", "set_s_of_one_body", "sigmas_from", "squared_sigmas", "view_covariance"]
 
-TORSO_CENTRE_M = 1.15  # height of a standing adult's torso centre (between hips 0.9 m and shoulders 1.4 m)
+# Height of a standing adult's torso centre: midway between the hips and the shoulders (edge.body).
+TORSO_CENTRE_M = 0.5 * (TYPICAL_HEIGHT_M[LEFT_HIP] + TYPICAL_HEIGHT_M[LEFT_SHOULDER])
 EDGE_MARGIN = 0.1  # fraction of the image's width and height left out on each side
 MERGE_AFTER_S = 0.5  # how long two confirmed tracks may stand inside each other before they are one
 

@@ -5,9 +5,9 @@ only, a person still tracked but unseen for over ``confirm_max_gap_s`` (``Lifecy
 a candidate that took a person's views is confirmed 2 s after it began, which may come before the
 person it took them from is removed, 2 s after their last view). A new person takes a lost
 person's id back when their colours match that one lost person clearly (median Bhattacharyya
-distance between the two histories below ``reid_d_max``, the next lost person and every person
-present at least ``REID_MARGIN`` further) and that person could have walked to where the new one
-stands. See ``host.tracking.tracker``'s module docstring.
+distance between the two histories below ``d_max``, the test a view passes to match a track; the
+next lost person and every person present at least ``REID_MARGIN`` further) and that person could
+have walked to where the new one stands. See ``host.tracking.tracker``'s module docstring.
 """
 
 from __future__ import annotations
@@ -66,7 +66,7 @@ def remembered_as(tr: Track, t: int, lost: Iterable[Lost], present: Iterable[Tra
         d = np.sqrt(np.clip(1.0 - mine @ person.amp.T, 0.0, 1.0))  # (n, n_lost)
         scored.append((float(np.median(d)), person))
     scored.sort(key=lambda s: s[0])
-    if not scored or scored[0][0] >= cfg.reid_d_max or (len(scored) > 1 and scored[1][0] - scored[0][0] < REID_MARGIN):
+    if not scored or scored[0][0] >= cfg.d_max or (len(scored) > 1 and scored[1][0] - scored[0][0] < REID_MARGIN):
         return None
     # Lighting differs between cameras, so the scale of "same colours" does too: the people
     # present now are certainly not the lost one, and must all look clearly less like it.

@@ -50,7 +50,7 @@ __all__ = ["Tracker"]
 _STATS = (
     "observations", "views", "wrong_site", "unknown_camera", "too_few_joints", "track_cap", "evicted_candidates", "too_few_joints_new",
     "no_ground_point", "no_signature", "unplaced_new", "suppressed", "duplicate_views", "matched", "new_candidates", "confirmed", "removed",
-    "dropped_candidates", "reidentified", "merged", "views_of_another_body", "feedback_refused", "estimates_off_track",
+    "dropped_candidates", "reidentified", "merged", "views_of_another_body", "feedback_refused",
 )
 
 

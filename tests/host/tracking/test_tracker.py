@@ -143,7 +143,6 @@ def one_person(t_ns: int, cam: Camera = C1, x: float = 0.0, seed: int = 0) -> Ob
         ("use_geometry", "yes"),       # not a bool
         ("min_joints", 18),            # more than COCO-17 has
         ("confirm_max_gap_s", 0.0),    # must be positive
-        ("geometry_weight", -1.0),     # negative weight
     ],
 )
 def test_config_is_validated(field, value):
