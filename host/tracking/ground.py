@@ -4,7 +4,8 @@ A joint of known height above the floor (edge.body.TYPICAL_HEIGHT_M) and a calib
 give a point: the pixel's ray meets the horizontal plane at that height. Each body part gives
 one candidate (a level):
 
-    ankles (mean of the visible ones) at 0.12 m, hips at 0.91 m, shoulders at 1.43 m,
+    ankles (mean of the visible ones; one ankle is anywhere in a walker's step) at 0.12 m,
+    hips at 0.91 m, shoulders at 1.43 m,
     the bottom-centre of the bounding box at 0 m,
     and the torso: the range at which the shoulders sit 0.52 m above the hips
 
@@ -80,6 +81,10 @@ LEVELS: Final[tuple[Level, ...]] = (
 )
 _PLANES: Final[int] = 4  # LEVELS[:_PLANES] meet a plane; the torso is LEVELS[_PLANES]
 _HIPS, _SHOULDERS, _TORSO = 1, 2, 4
+# A walker's ankles are up to half a step (about 0.35 m) ahead of and behind their centre: the
+# ankles' mean is near the centre, one ankle anywhere in that span (a spread of +-0.35 m has a
+# 1-sigma of 0.2 m). It replaces the ankles' ``body_std_m`` where one ankle is seen.
+_ONE_ANKLE_STD_M: Final[float] = 0.20
 # Below this height difference the ray grazes the plane and the point means nothing.
 _MIN_DH_M: Final[float] = 0.05
 # A box whose bottom is this close to the image's bottom edge has its feet cut off.
@@ -152,7 +157,9 @@ def ground_points(
         valid[:, -1] &= clipped | ((top_height >= _BOX_HEIGHT_M[0]) & (top_height <= _BOX_HEIGHT_M[1]))
         # sigma^2 = body^2 + (r dz / dh)^2 + (dtheta (r^2 + dh^2) / dh)^2
         sigma = np.full((n, p + 1), np.inf)
-        sigma[:, :p] = np.sqrt(sigma_fixed + (r * sigma_range) ** 2 + (sigma_pixel * (r * r + dh**2)) ** 2)
+        body2 = np.broadcast_to(sigma_fixed, (n, p)).copy()  # (N, P)
+        body2[seen[:, 0].sum(axis=1) == 1, 0] = _ONE_ANKLE_STD_M**2  # one ankle: anywhere in a step
+        sigma[:, :p] = np.sqrt(body2 + (r * sigma_range) ** 2 + (sigma_pixel * (r * r + dh**2)) ** 2)
         points[:, p], sigma[:, p] = _torso(d[:, _HIPS], d[:, _SHOULDERS], cam, max_range_m)
     sigma[:, :p][~valid] = np.inf
 

@@ -60,7 +60,7 @@ def view(cam: Camera, x: float, y: float, hide: tuple[int, ...] = (), scale: flo
     [
         ((3.0, 0.0), (), "ankles", 0.02),              # everything visible: the ankles decide
         ((5.0, 1.0), (), "ankles", 0.02),              # farther and off-axis
-        ((3.0, 0.0), (ANKLES[0],), "ankles", 0.15),    # one ankle: off by its lateral offset at most
+        ((3.0, 0.0), (ANKLES[0],), "hips", 0.02),      # one ankle is anywhere in a step: the hips decide
         ((3.0, 0.0), ANKLES, "hips", 0.02),            # no ankles: hips at 0.93 m
         ((3.0, 0.5), LOWER, "shoulders", 0.02),        # legs hidden (behind a table): shoulders
         ((3.0, 0.0), BELOW_HEAD, "bbox", 0.05),        # only the head: the box's bottom edge
@@ -75,6 +75,24 @@ def test_ground_point_levels(xy, hide, level, tol):
     assert np.linalg.norm(point - xy) < sigma
     _, _, levels = ground_points(view(cam, *xy, hide=hide).keypoints[None], view(cam, *xy).bbox[None], cam)
     assert levels[0] == LEVEL[level]
+
+
+@pytest.mark.parametrize("step_m", [-0.35, -0.2, 0.2, 0.35])
+def test_one_ankle_of_a_walker_is_no_surer_than_their_step(step_m):
+    # Mid-stride the seen ankle is up to half a step (0.35 m) ahead of or behind the person; the
+    # other is hidden, and so is the body above (only the knees and ankles reach the camera). The
+    # point may then be that far off, and says so: in simulated walks such views were 0.27 m off
+    # (rms) and claimed 0.16 m.
+    cam = camera()
+    joints = skeleton(3.0, 0.0)
+    joints[ANKLES[0], 0] += step_m  # walking along x
+    uv, _ = project(joints, cam)
+    kp = np.column_stack([uv, np.full(NUM_KEYPOINTS, 0.9)]).astype(np.float32)
+    kp[[i for i in range(NUM_KEYPOINTS) if i not in (ANKLES[0], INDEX["left_knee"], INDEX["right_knee"])]] = np.nan
+    xy, sigma, level = ground_points(kp[None], np.full((1, 4), np.nan, dtype=np.float32), cam)
+    assert level[0] == LEVEL["ankles"]
+    err = float(np.linalg.norm(xy[0] - (3.0, 0.0)))
+    assert err > 0.15 and sigma[0] >= 0.2 and err < 2 * sigma[0], (err, sigma[0])
 
 
 @pytest.mark.parametrize("scale", [0.88, 0.95, 1.0, 1.05, 1.1])  # people 1.54-1.93 m tall
