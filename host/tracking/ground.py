@@ -157,8 +157,8 @@ def ground_points(
         valid[:, -1] &= clipped | ((top_height >= _BOX_HEIGHT_M[0]) & (top_height <= _BOX_HEIGHT_M[1]))
         # sigma^2 = body^2 + (r dz / dh)^2 + (dtheta (r^2 + dh^2) / dh)^2
         sigma = np.full((n, p + 1), np.inf)
-        body2 = np.broadcast_to(sigma_fixed, (n, p)).copy()  # (N, P)
-        body2[seen[:, 0].sum(axis=1) == 1, 0] = _ONE_ANKLE_STD_M**2  # one ankle: anywhere in a step
+        one_ankle = (seen[:, 0].sum(axis=1) == 1)[:, None] & (np.arange(p) == 0)  # (N, P): anywhere in a step
+        body2 = np.where(one_ankle, _ONE_ANKLE_STD_M**2, sigma_fixed)  # (N, P)
         sigma[:, :p] = np.sqrt(body2 + (r * sigma_range) ** 2 + (sigma_pixel * (r * r + dh**2)) ** 2)
         points[:, p], sigma[:, p] = _torso(d[:, _HIPS], d[:, _SHOULDERS], cam, max_range_m)
     sigma[:, :p][~valid] = np.inf
