@@ -92,8 +92,25 @@ def fail(command: str, message: str) -> int:
 
 
 def stop_on_signals() -> threading.Event:
-    """An event that SIGTERM (systemd, docker stop) and SIGINT (Ctrl-C) set: a process's clean stop."""
+    """An event that SIGTERM (systemd, docker stop) and SIGINT (Ctrl-C) set: a process's clean stop.
+
+    The first of them sets it; later ones are ignored, the stop being under way. A handler that
+    set the event again could run while the first still holds the event's lock (a signal handler
+    runs in the main thread, between any two of its steps) and wait for that lock forever: two
+    SIGTERMs in a row (``timeout`` and ``make`` each passing one on) left ``superbody demo`` hung,
+    its router, cameras and host running.
+    """
     stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
+
+    def first(signum: int, frame: object) -> None:
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, _ignore)
+        stop.set()
+
+    signal.signal(signal.SIGTERM, first)
+    signal.signal(signal.SIGINT, first)
     return stop
+
+
+def _ignore(signum: int, frame: object) -> None:
+    """A later SIGTERM or SIGINT: the stop is under way (``stop_on_signals``)."""
