@@ -19,7 +19,11 @@ fits the site. For one person's views:
    triangulated from two cameras joined to its partner put at the typical height along one
    camera's ray mixes a small error with a large one, and the line between them turns (on
    dev.json, two-camera yaw 16.8 -> 10.3 deg MAE; from one camera the two ends' depth errors
-   are alike and the line keeps its direction).
+   are alike and the line keeps its direction). A line with an end on a ray that grazes its
+   plane (``MAX_PLACEMENT_STD_M``, as for the position) gives no direction: from a camera 1 m
+   up, the hips' rays meet their 0.91-m plane at a slope where a pixel of noise moves an end by
+   decimetres, so the two hips' points, metres long apart, turned the line anywhere and
+   outweighed the shoulders' (scene m, seed 1: a person in the hallway seen through the door).
 """
 
 from __future__ import annotations
@@ -126,16 +130,17 @@ def _joints_3d(views: Mapping[str, PersonView], site: Site, joints: Sequence[int
 
 
 def pair_points(views: Mapping[str, PersonView], site: Site, left: int, right: int,
-                joints: NDArray | None = None) -> tuple[NDArray, NDArray] | None:
-    """World points of a left/right joint pair from the cameras that saw both, or None.
+                joints: tuple[NDArray, NDArray] | None = None) -> tuple[NDArray, NDArray] | None:
+    """World points of a left/right joint pair from the cameras that saw both, or None (no camera
+    saw both, or an end lies on a ray that grazes its plane: ``MAX_PLACEMENT_STD_M``).
 
-    ``joints`` (``joints_3d`` of all ``views``) is reused when every view saw both.
+    ``joints`` (``_joints_3d`` of all ``views``: points and sigmas) is reused when every view saw both.
     """
     both = {c: v for c, v in views.items() if v.visible[left] and v.visible[right]}
     if not both:
         return None
-    j = joints if joints is not None and len(both) == len(views) else joints_3d(both, site, (left, right))
-    if np.isnan(j[left, 0]) or np.isnan(j[right, 0]):
+    j, sigma = joints if joints is not None and len(both) == len(views) else _joints_3d(both, site, (left, right))
+    if np.isnan(j[left, 0]) or np.isnan(j[right, 0]) or max(sigma[left], sigma[right]) > MAX_PLACEMENT_STD_M:
         return None
     return j[left], j[right]
 
@@ -226,7 +231,7 @@ class AnalyticEstimator:
             centre = j[sure if len(sure) else torso[[np.argmin(sigma[torso])]], :2].mean(0)
         facing = np.zeros(2)
         for left, right in _PAIRS:
-            ends = pair_points(views, self.site, left, right, j)
+            ends = pair_points(views, self.site, left, right, (j, sigma))
             if ends is not None:
                 lr = ends[0][:2] - ends[1][:2]
                 facing += np.array([lr[1], -lr[0]])  # the left-to-right vector turned -90 degrees
