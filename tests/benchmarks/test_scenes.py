@@ -295,13 +295,16 @@ def test_seeds_parse_ranges_and_lists_and_refuse_nonsense():
 
 
 def test_seeds_summary_counts_the_seeds_that_met_the_bar():
-    from benchmarks.scene_seeds import summarise
+    from benchmarks.scene_seeds import _tail, summarise
 
-    def run(seed, met, sw, extra):
-        return "k", seed, {"estimators": {"analytic": {"meets_bar": met, "id_switches": sw, "extra_tracks": extra}}}
+    def run(seed, met, sw, extra, yaw90):
+        return "k", seed, {"estimators": {"analytic": {"meets_bar": met, "id_switches": sw, "extra_tracks": extra, "yaw_deg_p90": yaw90}}}
 
-    got = summarise([run(1, True, 0, 0), run(2, False, 3, 1), run(3, True, 0, 0)])
-    assert got == {("k", "analytic"): {"seeds": 3, "met": 2, "missed": [2], "id_switches": 3, "extra_tracks": 1}}
+    got = summarise([run(1, True, 0, 0, 6.5), run(2, False, 3, 1, 31.0), run(3, True, 0, 0, 7.0)])
+    assert got == {("k", "analytic"): {"seeds": 3, "met": 2, "missed": [2], "id_switches": 3, "extra_tracks": 1,
+                                       "yaw_p90": {1: 6.5, 2: 31.0, 3: 7.0}}}
+    assert _tail(got["k", "analytic"]["yaw_p90"]) == "yaw p90 median 7.0 deg, worst 31.0 (seed 2)"
+    assert _tail({4: math.nan}) == "yaw p90 unknown"
 
 
 def test_seeds_benchmark_runs_as_its_own_process():
