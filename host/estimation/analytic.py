@@ -183,10 +183,16 @@ class AnalyticEstimator:
         several views' ground points (no torso joint triangulated) keeps the calibration's sigma
         for its camera count, or none: reported at their mean's (0.15-0.3 m) where the filter's
         default is 0.03 m, such poses moved the filter and the tracker so that scene m's yaw p90
-        went 23.6 -> 49.4 deg (``analytic``, seed 1, 45 s)."""
+        went 23.6 -> 49.4 deg (``analytic``, seed 1, 45 s). Without ``sigmas`` a yaw from the
+        head (the nose against the eyes and ears, each put at its height along one camera's ray)
+        says nothing either: the filter's default (4 deg) is a pair's error, and a head's yaw from
+        5-6 m and a camera 1 m up is 47 deg off at the median (scene m, seed 1; 29 on dev.json's
+        22 such samples), so it turned people seen through a doorway (m's ``analytic`` yaw p90
+        28.3 -> 15.8 deg). A calibration gives it its own sigma (the no-pair one)."""
         pose, cue, place_std = self._estimate(view_sets)
         if self.sigmas is None:
             std = np.full(pose.shape, np.nan)
+            std[cue == HEAD, 2] = YAW_STD_NO_CUE  # a yaw from the head, uncalibrated: says nothing (above)
         else:
             std = self.sigmas.analytic_sigmas(np.array([len(v) for v in view_sets], dtype=np.int64), cue == PAIR).reshape(pose.shape)
         std[:, :2] = np.fmax(std[:, :2], place_std[:, None])  # one view: no surer than its ground point

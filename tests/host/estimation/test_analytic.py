@@ -10,7 +10,7 @@ from superbody.edge import body
 from superbody.edge.angles import wrap_angle
 from superbody.edge.sim import NoiseModel, PersonState, World, render_views, skeleton
 from superbody.edge.site import load_site
-from superbody.host.estimation.analytic import AnalyticEstimator, joints_3d, pair_points, triangulate
+from superbody.host.estimation.analytic import HEAD, PAIR, AnalyticEstimator, joints_3d, pair_points, triangulate
 from superbody.models.data.wtf import load_wtf
 from tests.conftest import WTF_SITE
 
@@ -115,7 +115,8 @@ def test_dev_json_baseline(dev_json):
 def test_a_yaw_from_nothing_says_nothing():
     """One side of a body (no shoulder or hip pair, no nose with an eye or ear: a person cut off
     at an image edge) gives a yaw of 0 by convention, reported with an infinite sigma; a pair
-    gives its yaw with the filter's default (NaN, no sigmas); the head alone, the same."""
+    gives its yaw with the filter's default (NaN, no sigmas); the head alone says nothing either
+    without a calibration (``test_a_yaw_from_the_head_says_nothing_without_a_calibration``)."""
     from superbody.host.estimation.analytic import HEAD, NO_CUE, PAIR, YAW_STD_NO_CUE
 
     site = load_site(WTF_SITE)
@@ -132,7 +133,7 @@ def test_a_yaw_from_nothing_says_nothing():
     _, cue = AnalyticEstimator(site).estimate_with_cues([{"1": full}, only(left_side), only(head)])
     assert cue.tolist() == [PAIR, NO_CUE, HEAD]
     assert got.pose[1, 2] == 0.0 and got.std[1, 2] == YAW_STD_NO_CUE == math.inf
-    assert np.isnan(got.std[[0, 2], 2]).all()  # the filter's default
+    assert np.isnan(got.std[0, 2]) and got.std[2, 2] == math.inf  # a pair: the filter's default; the head: nothing
     assert (got.std[:, :2] > 0).all() and np.isfinite(got.std[:, :2]).all()  # one view: its ground point's sigma (below)
 
 
@@ -257,3 +258,25 @@ def test_views_that_triangulate_no_torso_joint_place_the_person_by_their_ground_
     got = AnalyticEstimator(site).estimate([views])[0]
     after = np.hypot(got[0] - 0.3, got[1] + 0.2)
     assert after < 0.08 and after < 0.5 * before
+
+
+def test_a_yaw_from_the_head_says_nothing_without_a_calibration():
+    """Scene m (45 s, seed 1): people in the hallway, seen through the door from 5-6 m by cameras
+    1 m up, often show a nose and an eye or ear and no shoulder or hip pair. The yaw from the head
+    was 47 deg off at the median; without a calibration the filter took it at its default 4 deg,
+    as if it were a pair's, and turned them (yaw p90 28.3 deg). It now says nothing to the filter
+    (an infinite sigma, as a yaw from nothing), but is still the pose's yaw; a calibration gives it
+    its no-pair sigma."""
+    from superbody.host.estimation import geometry_sigmas
+
+    site = _low_and_high()
+    view = _clean_views(site, 0.0, 0.0, 2.5, ("low",))["low"]
+    sets = [{"low": _only(view, [body.NOSE, body.INDEX["left_eye"], body.INDEX["right_eye"], body.INDEX["left_ear"]])}, {"low": view}]
+    _, cue = AnalyticEstimator(site).estimate_with_cues(sets)
+    assert cue.tolist() == [HEAD, PAIR]
+    got = AnalyticEstimator(site).estimate_detailed(sets)
+    assert got.std[0, 2] == math.inf and np.isnan(got.std[1, 2])  # the pair: the filter's default
+    calibration = geometry_sigmas(load_site(WTF_SITE))
+    assert calibration is not None
+    calibrated = AnalyticEstimator(site, calibration).estimate_detailed(sets)
+    assert np.isfinite(calibrated.std[:, 2]).all()
