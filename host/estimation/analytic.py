@@ -44,7 +44,7 @@ from superbody.edge.camera import intersect_plane, pixel_to_ray
 from superbody.edge.messages.observation import PersonView
 from superbody.edge.site import Site
 from superbody.host.estimation.estimator import Estimates
-from superbody.host.tracking.ground import ground_points
+from superbody.host.tracking.ground import ground_point, ground_points
 
 __all__ = ["AnalyticEstimator", "GeometrySigmas", "triangulate", "joints_3d", "pair_points", "YAW_STD_NO_CUE", "NO_CUE", "HEAD", "PAIR",
            "HEIGHT_STD_M", "MAX_PLACEMENT_STD_M"]
@@ -192,11 +192,10 @@ class AnalyticEstimator:
         pose, cue, place_std = self._estimate(view_sets)
         if self.sigmas is None:
             std = np.full(pose.shape, np.nan)
-            std[cue == HEAD, 2] = YAW_STD_NO_CUE  # a yaw from the head, uncalibrated: says nothing (above)
         else:
             std = self.sigmas.analytic_sigmas(np.array([len(v) for v in view_sets], dtype=np.int64), cue == PAIR).reshape(pose.shape)
         std[:, :2] = np.fmax(std[:, :2], place_std[:, None])  # one view: no surer than its ground point
-        std[cue == NO_CUE, 2] = YAW_STD_NO_CUE
+        std[(cue == NO_CUE) | ((cue == HEAD) & (self.sigmas is None)), 2] = YAW_STD_NO_CUE  # says nothing (above)
         return Estimates(pose, std, ("analytic",) * len(pose))
 
     def estimate(self, view_sets: Sequence[Mapping[str, PersonView]]) -> NDArray[np.float64]:
@@ -263,11 +262,8 @@ class AnalyticEstimator:
     def _fused_ground(self, views: Mapping[str, PersonView]) -> NDArray[np.float64]:
         """(2,) the views' ground points (``host.tracking.ground``) weighted by their inverse
         variances; NaN where no view gives one."""
-        xy, std = np.full((len(views), 2), np.nan), np.full(len(views), np.nan)
-        for k, (cam_id, v) in enumerate(views.items()):
-            xy[k], std[k], _ = (a[0] for a in ground_points(v.keypoints[None], np.asarray(v.bbox)[None], self.site.camera(cam_id)))
-        ok = np.isfinite(std)
-        if not ok.any():
+        points = [p for cam_id, v in views.items() if (p := ground_point(v, self.site.camera(cam_id))) is not None]
+        if not points:
             return np.full(2, np.nan)
-        w = 1.0 / std[ok] ** 2
-        return np.asarray((w @ xy[ok]) / w.sum(), dtype=np.float64)
+        w = np.array([1.0 / std**2 for _, std in points])
+        return np.asarray(w @ np.array([xy for xy, _ in points]) / w.sum(), dtype=np.float64)
