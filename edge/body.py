@@ -22,6 +22,7 @@ __all__ = [
     "RIGHT_HIP",
     "TORSO",
     "TYPICAL_HEIGHT_M",
+    "WIDTH_RANGE_M",
 ]
 
 KEYPOINTS: Final[tuple[str, ...]] = (
@@ -103,3 +104,14 @@ TYPICAL_HEIGHT_M: Final[tuple[float, ...]] = (
     0.12,  # 15 left_ankle
     0.12,  # 16 right_ankle
 )
+
+# Width of the shoulder and hip lines as a pose detector places their joints, metres: the least
+# and the most for adults. In the WheresTheFellow recordings (OpenPifPaf keypoints) the medians of
+# their extent across the camera's line of sight, over the views within 37 deg of facing the camera
+# or away from it, are 0.34 and 0.22 (each third of the recording and each camera within 0.02);
+# the simulator's body has 0.38 and 0.20, scaled with height (1.5-2.0 m: 0.33-0.43 and 0.17-0.23)
+# and build. Used to turn a line one camera saw (``host.estimation.analytic``).
+WIDTH_RANGE_M: Final[dict[tuple[int, int], tuple[float, float]]] = {
+    (LEFT_SHOULDER, RIGHT_SHOULDER): (0.28, 0.46),
+    (LEFT_HIP, RIGHT_HIP): (0.16, 0.30),
+}
