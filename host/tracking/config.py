@@ -55,8 +55,6 @@ class TrackerConfig:
         reid_window_s: a removed person is remembered this long for re-identification
             (``host.tracking.reid``; a person unseen for over ``confirm_max_gap_s`` is a
             candidate for it too; 0 turns re-identification off, both kinds).
-        reid_speed_mps: ... and if the remembered person, walking at this speed, could have
-            reached (within ``gate_m``) where the new one stands.
         confirm_min_support: a candidate is confirmed only if it was matched in at least this
             share of the frames of cameras that clearly saw where it stood, less those that
             glimpsed someone who could be it (``host.tracking.evidence``: a false positive one
@@ -90,7 +88,6 @@ class TrackerConfig:
     accel_std_mps2: float = 1.0
     max_tracks: int = 64
     reid_window_s: float = 30.0
-    reid_speed_mps: float = 1.5
     confirm_min_support: float = 0.5
     min_separation_m: float = 0.3
     same_body_sigmas: float = 3.0
@@ -110,7 +107,6 @@ class TrackerConfig:
         _check("accel_std_mps2", self.accel_std_mps2, 0.0, 100.0, lo_open=True)
         _check("max_tracks", self.max_tracks, 1, MAX_PEOPLE, integer=True)
         _check("reid_window_s", self.reid_window_s, 0.0, 3600.0)
-        _check("reid_speed_mps", self.reid_speed_mps, 0.0, 100.0)
         _check("confirm_min_support", self.confirm_min_support, 0.0, 1.0)
         _check("min_separation_m", self.min_separation_m, 0.0, 2.0)
         _check("same_body_sigmas", self.same_body_sigmas, 0.0, 100.0)

@@ -118,7 +118,7 @@ class Lifecycle:
         others = [o for o in self.tracks.values() if o is not tr and o.state == "confirmed"]
         unseen = [o for o in others if t - o.last_seen_ns > self.gap_ns] if self._reid_ns > 0 else []
         present = [o for o in others if o not in unseen]
-        lost = remembered_as(tr, t, [*self.lost.values(), *map(remember, unseen)], present, self.config)
+        lost = remembered_as(tr, [*self.lost.values(), *map(remember, unseen)], present, self.config)
         if lost is None:
             return
         if lost.id in self.lost:

@@ -554,19 +554,13 @@ def test_a_person_back_after_leaving_every_view_gets_their_id_back(back_x, back_
     assert (person.id == 1) == same_id and tr.stats["reidentified"] == int(same_id)
 
 
-def test_reidentification_needs_a_clear_winner_and_a_reachable_place():
+def test_reidentification_needs_a_clear_winner():
     # Two people in the same clothes leave together: who comes back is ambiguous, so a new id.
     tr = Tracker(SITE)
     t = _confirm_then_lose(tr, {"a": (-1.0, 0.0, 0.0, 20.0), "b": (1.0, 0.0, 0.0, 20.0)})
     for k in range(25):
         tr.update(frame(C1, t + k * S // 10, {"a": (-1.0, 0.0, 0.0, 20.0)}, seed=100 + k)[0])
     assert [p.id for p in tr.people(t + 25 * S // 10)] == [3] and tr.stats["reidentified"] == 0
-    # Too far to have walked there (1.5 m/s for 0.5 s after removal, 8 m away): a new id.
-    tr = Tracker(SITE, TrackerConfig(reid_speed_mps=0.1))
-    t = _confirm_then_lose(tr, {"a": (-3.0, 0.0, 0.0, 20.0)})
-    for k in range(25):
-        tr.update(frame(C1, t + k * S // 10, {"a": (3.0, 0.0, 0.0, 20.0)}, seed=100 + k)[0])
-    assert [p.id for p in tr.people(t + 25 * S // 10)] == [2]
 
 
 @pytest.mark.parametrize(("hue_b", "same_id"), [(20.0, True), (110.0, False)])
