@@ -172,7 +172,10 @@ def test_cameras_late_by_different_delays_are_all_fused_and_the_status_says_how_
         fused = {c: cams[c]["fused"] - before[c]["fused"] for c in delays}
         print(f"{len(arrays)} arrays, {empty:.1%} empty, age p50 {np.median(ages):.2f} s, views fused in 4 s {fused}")
         assert empty <= 0.02
-        assert 1.2 <= np.median(ages) <= 1.5  # as old as the latest camera makes it, and said so
+        # As old as the latest camera makes it, and said so: its frames come 1.2 s late give or take
+        # the 50 ms jitter (a normal spread both ways), so the median age may fall a little below
+        # 1.2 s (1.21-1.25 s in 20 runs); without that camera it would be about 0.8.
+        assert 1.15 <= np.median(ages) <= 1.5
         for cam, d in delays.items():
             assert abs(cams[cam]["delay_ms"]["p50"] / 1e3 - d) < 0.1, cams[cam]
             assert cams[cam]["state"] == "ok" and fused[cam] >= 15, (cam, fused)  # every camera's views go into the poses
