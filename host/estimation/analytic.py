@@ -48,7 +48,7 @@ from superbody.edge.camera import Camera, intersect_plane, pixel_to_ray
 from superbody.edge.messages.observation import PersonView
 from superbody.edge.site import Site
 from superbody.host.estimation.estimator import Estimates
-from superbody.host.tracking.ground import LEVELS, MAX_RANGE_M, ground_point, ground_points
+from superbody.host.tracking.ground import LEVELS, MAX_RANGE_M, ground_point, ground_points, torso_range
 
 __all__ = ["AnalyticEstimator", "GeometrySigmas", "triangulate", "joints_3d", "pair_points", "YAW_STD_NO_CUE", "NO_CUE", "HEAD", "PAIR",
            "HEIGHT_STD_M", "MAX_PLACEMENT_STD_M"]
@@ -73,11 +73,10 @@ _HEIGHTS = np.asarray(body.TYPICAL_HEIGHT_M)
 # are the same (``superbody eval ... --estimator analytic``).
 HEIGHT_STD_M = 0.10
 MAX_PLACEMENT_STD_M = 3.0
-_ANGLES = np.radians(np.arange(0.0, 360.0, 1.0))
+_COS, _SIN = np.cos(np.radians(np.arange(360.0))), np.sin(np.radians(np.arange(360.0)))  # candidate yaws, 1 deg apart
 _PAIRS = ((body.LEFT_SHOULDER, body.RIGHT_SHOULDER), (body.LEFT_HIP, body.RIGHT_HIP))
 _HEAD = (1, 2, 3, 4)  # eyes and ears
 _SHOULDERS, _HIPS = _PAIRS
-_TORSO_M = body.TYPICAL_HEIGHT_M[body.LEFT_SHOULDER] - body.TYPICAL_HEIGHT_M[body.LEFT_HIP]
 _PIXEL_STD = {pair: next(lv.pixel_std for lv in LEVELS if set(lv.joints) == set(pair)) for pair in _PAIRS}  # the ground levels' detector noise
 
 
@@ -157,9 +156,10 @@ def pair_points(views: Mapping[str, PersonView], site: Site, left: int, right: i
     return j[left], j[right]
 
 
-def _one_camera_facing(lines: Sequence[tuple[tuple[NDArray, NDArray], tuple[int, int]]], view: PersonView, cam: Camera) -> NDArray[np.float64]:
+def _one_camera_facing(lines: Sequence[tuple[tuple[NDArray, NDArray], tuple[int, int]]], view: PersonView, cam: Camera) -> NDArray[np.float64] | None:
     """(2,) the facing (a direction) of a torso whose shoulder and hip lines (``pair_points``' ends, and
-    the pair) one camera saw, each end at its typical height along the camera's rays.
+    the pair) one camera saw, each end at its typical height along the camera's rays; None where
+    there is no line of sight to fit them along (below).
 
     Across the camera's line of sight a line's offset comes from pixels and is sure; along it it
     comes from where each end's ray meets its typical height, so a pixel of noise, or an end a
@@ -175,19 +175,18 @@ def _one_camera_facing(lines: Sequence[tuple[tuple[NDArray, NDArray], tuple[int,
     widths (no noise) keep their direction. The sigmas are the pixels' alone (the ground levels'
     detector noise), which make the offset along 3-10 times less sure than across from 2-6 m; a
     lean added to them changed dev.json's figures by 0.1 deg. A person under the camera (within
-    0.1 m of its foot) has no line of sight along the floor: the lines as placed.
+    0.1 m of its foot) has no line of sight along the floor: None (the lines as placed).
     """
-    torso_r = _torso_range(view, cam)
     d = np.mean([0.5 * (left[:2] + right[:2]) for (left, right), _ in lines], axis=0) - cam.t[:2]
     r = float(np.hypot(*d))
     if r < 0.1:
-        lr = sum((left[:2] - right[:2] for (left, right), _ in lines), np.zeros(2))
-        return np.array([lr[1], -lr[0]])
+        return None
     d = d / r  # along the line of sight
     p = np.array([-d[1], d[0]])  # across it, to the camera's left
+    torso_r = _torso_range(view, cam)
     scale = torso_r / r if 0.0 < torso_r <= MAX_RANGE_M else 1.0  # to a typical torso's size
-    c, s = np.cos(_ANGLES), np.sin(_ANGLES)
-    cost = np.zeros(len(_ANGLES))
+    c, s = _COS, _SIN
+    cost = np.zeros(len(c))
     for (left, right), pair in lines:
         lr = (left[:2] - right[:2]) * scale
         across, along = float(lr @ p), float(lr @ d)
@@ -206,14 +205,13 @@ def _one_camera_facing(lines: Sequence[tuple[tuple[NDArray, NDArray], tuple[int,
 
 def _torso_range(view: PersonView, cam: Camera) -> float:
     """Horizontal range (m) at which the shoulders' ray (their visible ones' mean pixel) passes a
-    typical torso's length above the hips' (``host.tracking.ground``'s torso level); NaN without
-    both, or where the rays do not part upwards."""
+    typical torso's length above the hips' (``host.tracking.ground.torso_range``, its torso
+    level); NaN without both, 0 or less where the rays do not part upwards."""
     mean_px = [np.nanmean(view.keypoints[list(j), :2], axis=0) for j in (_SHOULDERS, _HIPS) if view.visible[list(j)].any()]
     if len(mean_px) < 2:
         return math.nan
-    rays = pixel_to_ray(np.array(mean_px, dtype=np.float64), cam)[1]
-    tan_s, tan_h = rays[:, 2] / np.hypot(rays[:, 0], rays[:, 1])
-    return float(_TORSO_M / (tan_s - tan_h)) if tan_s > tan_h else math.nan
+    shoulders, hips = pixel_to_ray(np.array(mean_px, dtype=np.float64), cam)[1]
+    return float(torso_range(hips[None], shoulders[None])[0])
 
 
 class GeometrySigmas(Protocol):
@@ -317,10 +315,13 @@ class AnalyticEstimator:
             if (ends := pair_points(views, self.site, *pair, (j, sigma))) is not None:
                 lines[pair] = ends, [c for c, v in views.items() if v.visible[pair[0]] and v.visible[pair[1]]]
         cameras = {cam for _, seen_by in lines.values() for cam in seen_by}
+        fitted = None
         if len(cameras) == 1:  # one camera saw every line: fit them together (``_one_camera_facing``)
             cam_id = cameras.pop()
-            facing = _one_camera_facing([(ends, pair) for pair, (ends, _) in lines.items()], views[cam_id], self.site.camera(cam_id))
-        else:
+            fitted = _one_camera_facing([(ends, pair) for pair, (ends, _) in lines.items()], views[cam_id], self.site.camera(cam_id))
+        if fitted is not None:
+            facing = fitted
+        else:  # the lines as placed
             for ends, _ in lines.values():
                 lr = ends[0][:2] - ends[1][:2]
                 facing += np.array([lr[1], -lr[0]])  # the left-to-right vector turned -90 degrees

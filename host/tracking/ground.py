@@ -48,7 +48,7 @@ from superbody.edge.body import INDEX, LEFT_HIP, LEFT_SHOULDER, RIGHT_HIP, RIGHT
 from superbody.edge.camera import Camera, intersect_plane, pixel_to_ray
 from superbody.edge.messages.observation import PersonView
 
-__all__ = ["MAX_RANGE_M", "LEVELS", "Level", "ground_point", "ground_points"]
+__all__ = ["MAX_RANGE_M", "LEVELS", "Level", "ground_point", "ground_points", "torso_range"]
 
 MAX_RANGE_M: Final[float] = 30.0
 
@@ -171,13 +171,22 @@ def ground_points(
     return xy, np.where(found, best, np.nan), np.where(found, level, -1).astype(np.int8)
 
 
+def torso_range(hips: NDArray, shoulders: NDArray) -> NDArray[np.float64]:
+    """(N,) horizontal ranges (m) at which the shoulders' rays (N, 3) pass a typical torso's
+    length (``_TORSO_M``) above the hips' rays (N, 3) from the same camera: NaN without both rays,
+    0 or less where they do not part upwards."""
+    tan_h = hips[:, 2] / np.hypot(hips[:, 0], hips[:, 1])  # (N,) elevation tangents
+    tan_s = shoulders[:, 2] / np.hypot(shoulders[:, 0], shoulders[:, 1])
+    return np.asarray(_TORSO_M / (tan_s - tan_h), dtype=np.float64)
+
+
 def _torso(hips: NDArray, shoulders: NDArray, cam: Camera, max_range_m: float) -> tuple[NDArray, NDArray]:
     """Floor points (N, 2) and sigmas (N,; inf where none) from the torso's length: the range
     at which the shoulders' ray passes ``_TORSO_M`` above the hips' (see the module docstring)."""
     lv = LEVELS[_TORSO]
     flat_h, flat_s = np.hypot(hips[:, 0], hips[:, 1]), np.hypot(shoulders[:, 0], shoulders[:, 1])  # (N,)
     tan_h, tan_s = hips[:, 2] / flat_h, shoulders[:, 2] / flat_s  # (N,) elevation tangents
-    r = lv.height_m / (tan_s - tan_h)  # (N,) NaN without both rays
+    r = torso_range(hips, shoulders)  # (N,) NaN without both rays
     ahead = hips[:, :2] / flat_h[:, None] + shoulders[:, :2] / flat_s[:, None]  # (N, 2) the person's direction
     ahead /= np.linalg.norm(ahead, axis=1, keepdims=True)
     dtheta = lv.pixel_std / (0.5 * (cam.fx + cam.fy))
