@@ -50,7 +50,9 @@ per camera), and its capture stamp is kept:
 - ``mixed``: 0.1 / 0.4 / 0.8 / 1.2 / 0.3 s late by camera index (cycling for more cameras),
   50 ms jitter;
 - ``mixedfps``: 25 / 10 / 5 / 25 / 10 fps by camera index (cycling), 0.2 s late, 50 ms jitter.
-  The cameras are simulated at those rates (a 15 fps recording cannot give 25 fps).
+  The cameras are simulated at those rates (a 15 fps recording cannot give 25 fps);
+- ``step0.2``: every camera 0.3 s late, and the host steps at most every 0.2 s (a host publishing
+  at 5 Hz, ``max_publish_hz``, or one that falls behind): each step fuses three frames of each camera.
 
 Scoring (``MotScorer``), once per 15 fps frame period (at the instant the last camera's frame of
 that period is captured), with the array the host last published by then: each published person
@@ -318,12 +320,15 @@ class Timing:
         delays_s: capture-to-delivery delay by camera index, seconds, cycling for more cameras.
         jitter_s: the delays' standard deviation (normal, clipped at no delay), every camera.
         fps: capture rate by camera index, cycling, or None: every camera at ``FPS``.
+        step_s: the host steps at most this often, seconds of its clock (as ``max_publish_hz``
+            makes it, or a host that falls behind); 0: after each delivery time.
     """
 
     name: str
     delays_s: tuple[float, ...] = (0.0,)
     jitter_s: float = 0.0
     fps: tuple[float, ...] | None = None
+    step_s: float = 0.0
 
     def delivery(self, index: int) -> DeliveryModel:
         """Camera ``index``'s delay and jitter."""
@@ -340,6 +345,7 @@ TIMINGS: Final[dict[str, Timing]] = {t.name: t for t in (
     Timing("late0.8", (0.8,)),
     Timing("mixed", (0.1, 0.4, 0.8, 1.2, 0.3), 0.05),
     Timing("mixedfps", (0.2,), 0.05, (25.0, 10.0, 5.0, 25.0, 10.0)),
+    Timing("step0.2", (0.3,), step_s=0.2),
 )}
 
 
@@ -736,6 +742,7 @@ def replay(scene: Scene, rec: Recording, estimator, name: str, config: HostConfi
         views.extend(p.views for p in people)
 
     i = 0
+    step_ns, next_step = round(timing.step_s * 1e9), -1
     while i < len(order):
         now = order[i][0]
         while s_next is not None and s_next < now:  # scored with what the host had published by then
@@ -746,6 +753,9 @@ def replay(scene: Scene, rec: Recording, estimator, name: str, config: HostConfi
             agg.ingest(payload, keys[cam], now)
             i += 1
             bar.update()
+        if now < next_step:
+            continue
+        next_step = now + step_ns
         arr = agg.step(now)
         published, as_of = arr.people, arr.stamp_ns - arr.latency_ns
         arrays += 1

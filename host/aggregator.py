@@ -8,9 +8,11 @@ site's own cameras, so no name a peer puts in a liveliness key ever reaches an e
 ``step()`` moves the watermark (the newest capture instant every camera still delivering has
 delivered up to), feeds the tracker the frames captured up to it in capture order (a bounded
 number per step), prunes, takes each confirmed person's set S as of that instant (their latest
-view per camera, fresh then), estimates the people whose views changed in one batched call,
-filters (each estimate taken at the mean capture time of its views, the pose predicted on to the
-newest view's time), and returns the PoseArray. So a late camera's views are fused with the
+view per camera, fresh then; and, where the step released several frames of a camera, as of the
+end of each instant before, so no view goes unestimated however seldom the host steps),
+estimates the people whose views changed in one batched call per instant, filters (each
+estimate taken at the mean capture time of its views, the pose predicted on to the newest
+view's time), and returns the PoseArray. So a late camera's views are fused with the
 other cameras' views of the same instant, and the poses describe the world as of the watermark:
 ``PoseArray.latency_ns`` is the host clock at the step minus that instant. Bad payloads are
 counted by reason and dropped, never fatal. The process around it is ``host/service.py``.
@@ -162,6 +164,8 @@ class Aggregator:
         self._filters: dict[int, PoseFilter] = {}
         self._last_input: dict[int, int] = {}  # track -> newest view stamp already estimated
         self._poses: dict[int, tuple[pose_msg.PersonPose, int]] = {}  # track -> (pose, newest stamp)
+        self._instant: set[str] = set()  # cameras released since the last instant's end
+        self._instant_ns = 0  # capture time of the last frame released
         self._cam_size = {c.id: (c.width, c.height) for c in site.cameras}
         self._seq = 0
         # Reached by one call per step: the estimator's own sigmas and sources, or its poses with the
@@ -230,9 +234,19 @@ class Aggregator:
 
     def step(self, now_ns: int) -> pose_msg.PoseArray:
         """Fuse the frames the watermark passed, prune, estimate the people with new views, filter,
-        and build the PoseArray as of the fused instant (``as_of_ns``)."""
+        and build the PoseArray as of the fused instant (``as_of_ns``).
+
+        The frames come in capture order. Where a camera's next frame comes before the step's end,
+        every camera's view of the instant before it is in: the people are estimated as of that
+        instant first (``_estimate_sets``), so a set S of one instant is estimated before the next
+        frame replaces one of its views, as well as the set as of the step's end."""
         self.timeline.watermark(now_ns)
         for obs in self.timeline.release(self.config.max_frames_per_step):
+            if obs.camera in self._instant:
+                self._estimate_sets(self._instant_ns)
+                self._instant.clear()
+            self._instant.add(obs.camera)
+            self._instant_ns = int(obs.stamp_ns)
             self.tracker.update(obs)
         t = self.timeline.released_to()
         assert t is not None  # the watermark has been moved
@@ -242,6 +256,16 @@ class Aggregator:
             self._filters.pop(tr.id, None)
             self._last_input.pop(tr.id, None)
             self._poses.pop(tr.id, None)
+        sets = self._estimate_sets(t)
+        people = tuple(p for tid, (p, _) in sorted(self._poses.items()) if tid in sets)
+        self._seq += 1
+        return pose_msg.PoseArray(
+            site=self.site.name, seq=self._seq, stamp_ns=now_ns, people=people, latency_ns=max(0, int(now_ns) - t),
+            cameras_alive=tuple(sorted(self.cameras_alive)), estimator=self.estimator_name,
+        )
+
+    def _estimate_sets(self, t: int) -> dict[int, dict[str, PersonView]]:
+        """Estimate and filter the people whose set S as of ``t`` holds a view not estimated yet; return every set S."""
         sets = self.tracker.view_sets(t, self.config.freshness_s)
         stamps_of: dict[int, list[int]] = {}
         for tid, views in sets.items():
@@ -298,13 +322,7 @@ class Aggregator:
                     cov=fp.cov, confidence=c, cameras=tuple(sorted(views)),
                     stamp_ns=newest[tid], views=len(views), estimator=est.source[i],
                 ), newest[tid])
-        people = tuple(p for tid, (p, _) in sorted(self._poses.items()) if tid in sets)
-        self._seq += 1
-        return pose_msg.PoseArray(
-            site=self.site.name, seq=self._seq, stamp_ns=now_ns, people=people, latency_ns=max(0, int(now_ns) - t),
-            cameras_alive=tuple(sorted(self.cameras_alive)), estimator=self.estimator_name,
-        )
-
+        return sets
 
     def _watch_calibration(self, tids: list[int], sets: dict[int, dict[str, PersonView]], stamps_of: dict[int, list[int]],
                            newest: dict[int, int], poses: list) -> None:
