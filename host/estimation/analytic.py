@@ -28,10 +28,11 @@ fits the site. For one person's views:
    up, the hips' rays meet their 0.91-m plane at a slope where a pixel of noise moves an end by
    decimetres, so the two hips' points, metres long apart, turned the line anywhere and
    outweighed the shoulders' (scene m, seed 1: a person in the hallway seen through the door).
-   Where one camera saw every line, their offsets across its line of sight come from pixels and
-   are sure, and along it from the ends' typical heights and are not: the yaw is the one at which
-   lines of an adult's width best explain both (``_one_camera_facing``; dev.json per frame, one
-   camera: 24.8 -> 20.2 deg MAE).
+   Where one camera alone saw a line, its offsets across that camera's line of sight come from
+   pixels and are sure, and along it from the ends' typical heights and are not: the yaw is the
+   one at which lines of an adult's width best explain every line's offsets, the triangulated
+   ones as sure both ways (``_fitted_facing``; dev.json per frame, one camera: 24.8 -> 20.2 deg
+   MAE; two cameras, where one saw a line alone: 9.4-9.9 -> 3.6-4.7).
 """
 
 from __future__ import annotations
@@ -73,7 +74,8 @@ _HEIGHTS = np.asarray(body.TYPICAL_HEIGHT_M)
 # are the same (``superbody eval ... --estimator analytic``).
 HEIGHT_STD_M = 0.10
 MAX_PLACEMENT_STD_M = 3.0
-_COS, _SIN = np.cos(np.radians(np.arange(360.0))), np.sin(np.radians(np.arange(360.0)))  # candidate yaws, 1 deg apart
+_ANGLES = np.radians(np.arange(360.0))  # candidate yaws, 1 deg apart
+_COS, _SIN = np.cos(_ANGLES), np.sin(_ANGLES)
 _PAIRS = ((body.LEFT_SHOULDER, body.RIGHT_SHOULDER), (body.LEFT_HIP, body.RIGHT_HIP))
 _HEAD = (1, 2, 3, 4)  # eyes and ears
 _SHOULDERS, _HIPS = _PAIRS
@@ -156,50 +158,74 @@ def pair_points(views: Mapping[str, PersonView], site: Site, left: int, right: i
     return j[left], j[right]
 
 
-def _one_camera_facing(lines: Sequence[tuple[tuple[NDArray, NDArray], tuple[int, int]]], view: PersonView, cam: Camera) -> NDArray[np.float64] | None:
-    """(2,) the facing (a direction) of a torso whose shoulder and hip lines (``pair_points``' ends, and
-    the pair) one camera saw, each end at its typical height along the camera's rays; None where
-    there is no line of sight to fit them along (below).
+def _fitted_facing(lines: Sequence[tuple[tuple[NDArray, NDArray], tuple[int, int], list[str]]], views: Mapping[str, PersonView],
+                   site: Site) -> NDArray[np.float64] | None:
+    """(2,) the facing (a direction) of a torso from its shoulder and hip lines (``pair_points``' ends,
+    the pair, and the cameras that saw both ends), where some line was seen by one camera alone: each
+    end then at its typical height along that camera's rays. None where such a camera has no line of
+    sight to fit along (below).
 
-    Across the camera's line of sight a line's offset comes from pixels and is sure; along it it
+    Across a camera's line of sight a line's offset comes from pixels and is sure; along it it
     comes from where each end's ray meets its typical height, so a pixel of noise, or an end a
     few centimetres higher than its partner, moves it by the ray's slope times that (on dev.json's
     single views, 0.14 m 1-sigma against 0.04 across). Taken as they are, the two offsets turned
     a line seen side-on, whose offset across is nearly 0, anywhere the depth's noise sent it.
     Here the facing is the one at which lines of an adult's width (``body.WIDTH_RANGE_M``) best
-    explain every line's two offsets, each by its own sigma: side-on, the offsets across say how
+    explain every line's offsets, each by its own sigma: side-on, the offsets across say how
     far the torso is turned and the depths only which way; facing the camera or away, the
-    depths' noise is what is left. Widths are measured against the torso's length where the view
-    shows both (``_torso_range``): a tall person's lines, put at a typical height along the rays,
-    come out too far and too wide, and both by the same factor. Lines whose offsets fit such
-    widths (no noise) keep their direction. The sigmas are the pixels' alone (the ground levels'
-    detector noise), which make the offset along 3-10 times less sure than across from 2-6 m; a
-    lean added to them changed dev.json's figures by 0.1 deg. A person under the camera (within
-    0.1 m of its foot) has no line of sight along the floor: None (the lines as placed).
+    depths' noise is what is left. A line two cameras or more triangulated is as sure along as
+    across (the pixels' sigma at its range, both ways). Widths are measured against the torso's
+    length where the one camera's view shows both (``_torso_range``): a tall person's lines, put
+    at a typical height along the rays, come out too far and too wide, and both by the same
+    factor. Lines whose offsets fit such widths (no noise) keep their direction. The sigmas are
+    the pixels' alone (the ground levels' detector noise), which make the offset along 3-10 times
+    less sure than across from 2-6 m; a lean added to them changed dev.json's figures by 0.1 deg.
+    A person under a camera that saw a line alone (within 0.1 m of its foot) has no line of sight
+    along the floor: None (the lines as placed).
     """
-    d = np.mean([0.5 * (left[:2] + right[:2]) for (left, right), _ in lines], axis=0) - cam.t[:2]
-    r = float(np.hypot(*d))
-    if r < 0.1:
-        return None
-    d = d / r  # along the line of sight
-    p = np.array([-d[1], d[0]])  # across it, to the camera's left
-    torso_r = _torso_range(view, cam)
-    scale = torso_r / r if 0.0 < torso_r <= MAX_RANGE_M else 1.0  # to a typical torso's size
-    c, s = _COS, _SIN
-    cost = np.zeros(len(c))
-    for (left, right), pair in lines:
-        lr = (left[:2] - right[:2]) * scale
+    cost = np.zeros(len(_COS))
+    alone = {cams[0] for _, _, cams in lines if len(cams) == 1}
+    frames = {}
+    for cam_id in alone:  # each such camera's line of sight, and its scale to a typical torso
+        cam = site.camera(cam_id)
+        d = np.mean([0.5 * (left[:2] + right[:2]) for (left, right), _, cams in lines if cams == [cam_id]], axis=0) - cam.t[:2]
+        r = float(np.hypot(*d))
+        if r < 0.1:
+            return None
+        torso_r = _torso_range(views[cam_id], cam)
+        frames[cam_id] = (cam, d / r, r, torso_r / r if 0.0 < torso_r <= MAX_RANGE_M else 1.0)
+    ref: tuple[NDArray, NDArray] | None = None  # the first line's frame: along, across its line of sight
+    for (left, right), pair, cams in lines:
+        lr = left[:2] - right[:2]
+        if len(cams) == 1:
+            cam, d, r, scale = frames[cams[0]]
+            lr = lr * scale
+            dh = max(abs(float(cam.t[2] - 0.5 * (left[2] + right[2]))), 1e-6)
+            dtheta = _PIXEL_STD[pair] / (0.5 * (cam.fx + cam.fy))
+            var_across = 2.0 * (dtheta * r) ** 2
+            var_along = 2.0 * (dtheta * (r * r + dh * dh) / dh) ** 2
+        else:  # triangulated: the pixels' sigma at its range, both ways
+            cam = site.camera(cams[0])
+            mid = 0.5 * (left[:2] + right[:2])
+            r = float(np.mean([np.hypot(*(mid - site.camera(k).t[:2])) for k in cams]))
+            d = (mid - cam.t[:2]) / max(float(np.hypot(*(mid - cam.t[:2]))), 1e-6)
+            dtheta = _PIXEL_STD[pair] / (0.5 * (cam.fx + cam.fy))
+            var_across = var_along = 2.0 * (dtheta * max(r, 0.1)) ** 2
+        p = np.array([-d[1], d[0]])  # across the line of sight, to the camera's left
+        # The line at angle a in the first line's frame (across its line of sight, along it) is
+        # at a - (this frame's bearing - the first's) in this one; there, with width w,
+        # across = w cos a, along = -w sin a. For each a the best w in the range (the least
+        # squares' w, clipped), then the best a for all lines.
+        if ref is None:
+            ref = d, p
+        turn = math.atan2(float(d @ ref[1]), float(d @ ref[0]))  # this frame's bearing less the first's
+        c, s = (_COS, _SIN) if turn == 0.0 else (np.cos(_ANGLES - turn), np.sin(_ANGLES - turn))
         across, along = float(lr @ p), float(lr @ d)
-        dh = max(abs(float(cam.t[2] - 0.5 * (left[2] + right[2]))), 1e-6)
-        dtheta = _PIXEL_STD[pair] / (0.5 * (cam.fx + cam.fy))
-        var_across = 2.0 * (dtheta * r) ** 2
-        var_along = 2.0 * (dtheta * (r * r + dh * dh) / dh) ** 2
-        # The line at angle a and width w: across = w cos a, along = -w sin a. For each a the
-        # best w in the range (the least squares' w, clipped), then the best a for all lines.
         w = np.clip((across * c / var_across - along * s / var_along) / (c * c / var_across + s * s / var_along), *body.WIDTH_RANGE_M[pair])
         cost += (across - w * c) ** 2 / var_across + (along + w * s) ** 2 / var_along
+    assert ref is not None  # lines is never empty
     k = int(np.argmin(cost))
-    lr = c[k] * p - s[k] * d
+    lr = _COS[k] * ref[1] - _SIN[k] * ref[0]  # the left-to-right direction in the world
     return np.array([lr[1], -lr[0]])
 
 
@@ -314,11 +340,9 @@ class AnalyticEstimator:
         for pair in _PAIRS:
             if (ends := pair_points(views, self.site, *pair, (j, sigma))) is not None:
                 lines[pair] = ends, [c for c, v in views.items() if v.visible[pair[0]] and v.visible[pair[1]]]
-        cameras = {cam for _, seen_by in lines.values() for cam in seen_by}
         fitted = None
-        if len(cameras) == 1:  # one camera saw every line: fit them together (``_one_camera_facing``)
-            cam_id = cameras.pop()
-            fitted = _one_camera_facing([(ends, pair) for pair, (ends, _) in lines.items()], views[cam_id], self.site.camera(cam_id))
+        if any(len(seen_by) == 1 for _, seen_by in lines.values()):  # a line one camera placed: fit them together (``_fitted_facing``)
+            fitted = _fitted_facing([(ends, pair, seen_by) for pair, (ends, seen_by) in lines.items()], views, self.site)
         if fitted is not None:
             facing = fitted
         else:  # the lines as placed
