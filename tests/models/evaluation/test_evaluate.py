@@ -140,7 +140,9 @@ def test_baseline_on_dev_json_with_and_without_the_offset(samples):
     raw = score(samples, pred, 0.0)["analytic"]
     # The README's crude RGB geometry: MAE x 140 mm, z (our y) 159 mm against the tracker itself.
     assert 120 < raw["position_mae_mm"]["x"] < 160 and 140 < raw["position_mae_mm"]["y"] < 180
-    assert 10 < raw["yaw_mae_deg"] < 20
+    # Its yaw 11.4 deg; ours is below it since December 2026 (9.8: one camera's lines fitted to an
+    # adult's width). A wrong angle zero or sense would give tens of degrees.
+    assert 5 < raw["yaw_mae_deg"] < 20
     moved = score(samples, pred, TRUTH_OFFSET_M)["analytic"]
     # Moving the torso centre to the chest tracker must help, and leave the yaw alone.
     assert moved["position_mae_mm"]["x"] < raw["position_mae_mm"]["x"] - 30
