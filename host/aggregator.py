@@ -168,7 +168,7 @@ class Aggregator:
         self._instant_ns = 0  # capture time of the last frame released
         self._cam_size = {c.id: (c.width, c.height) for c in site.cameras}
         self._seq = 0
-        # Reached by one call per step: the estimator's own sigmas and sources, or its poses with the
+        # Reached by one call per instant estimated: the estimator's own sigmas and sources, or its poses with the
         # host's estimator name as every person's source.
         self._estimate = detailed(estimator, estimator_name.split(":", 1)[0]).estimate_detailed
 

@@ -204,13 +204,12 @@ def _fitted_facing(lines: Sequence[tuple[tuple[NDArray, NDArray], tuple[int, int
             dtheta = _PIXEL_STD[pair] / (0.5 * (cam.fx + cam.fy))
             var_across = 2.0 * (dtheta * r) ** 2
             var_along = 2.0 * (dtheta * (r * r + dh * dh) / dh) ** 2
-        else:  # triangulated: the pixels' sigma at its range, both ways
+        else:  # triangulated: the pixels' sigma at its range, both ways (so any frame will do: its first camera's)
             cam = site.camera(cams[0])
             mid = 0.5 * (left[:2] + right[:2])
-            r = float(np.mean([np.hypot(*(mid - site.camera(k).t[:2])) for k in cams]))
+            r = max(float(np.mean([np.hypot(*(mid - site.camera(k).t[:2])) for k in cams])), 0.1)
             d = (mid - cam.t[:2]) / max(float(np.hypot(*(mid - cam.t[:2]))), 1e-6)
-            dtheta = _PIXEL_STD[pair] / (0.5 * (cam.fx + cam.fy))
-            var_across = var_along = 2.0 * (dtheta * max(r, 0.1)) ** 2
+            var_across = var_along = 2.0 * (_PIXEL_STD[pair] / (0.5 * (cam.fx + cam.fy)) * r) ** 2
         p = np.array([-d[1], d[0]])  # across the line of sight, to the camera's left
         # The line at angle a in the first line's frame (across its line of sight, along it) is
         # at a - (this frame's bearing - the first's) in this one; there, with width w,
