@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 
 from superbody.edge import transport
 from superbody.edge.messages import wire
-from superbody.edge.messages.observation import PersonView
+from superbody.edge.messages.observation import Observation, PersonView
 from superbody.edge.site import Site
 from superbody.host.calibration.health import CalibrationHealth
 from superbody.host.estimation.estimator import Estimator, detailed
@@ -237,17 +237,25 @@ class Aggregator:
         and build the PoseArray as of the fused instant (``as_of_ns``).
 
         The frames come in capture order. Where a camera's next frame comes before the step's end,
-        every camera's view of the instant before it is in: the people are estimated as of that
-        instant first (``_estimate_sets``), so a set S of one instant is estimated before the next
-        frame replaces one of its views, as well as the set as of the step's end."""
+        every camera's view of the instant before it is in: its frames are associated with the
+        people together (``Tracker.update_instant``) and the people estimated as of that instant
+        (``_estimate_sets``), so a set S of one instant is estimated before the next frame replaces
+        one of its views, as well as the set as of the step's end. The frames of an instant the
+        step's end cuts are associated then, the rest with the next step's."""
         self.timeline.watermark(now_ns)
+        frames: list[Observation] = []  # the instant's frames not associated yet
         for obs in self.timeline.release(self.config.max_frames_per_step):
             if obs.camera in self._instant:
+                if frames:
+                    self.tracker.update_instant(frames)
+                    frames.clear()
                 self._estimate_sets(self._instant_ns)
                 self._instant.clear()
             self._instant.add(obs.camera)
             self._instant_ns = int(obs.stamp_ns)
-            self.tracker.update(obs)
+            frames.append(obs)
+        if frames:
+            self.tracker.update_instant(frames)
         t = self.timeline.released_to()
         assert t is not None  # the watermark has been moved
         self.as_of_ns = t

@@ -137,7 +137,8 @@ def median_colour_distance(hists: NDArray, history: NDArray, counts: NDArray) ->
     return med
 
 
-def associate(t: int, tracks: list[Track], views: FrameViews, cfg: TrackerConfig) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray, NDArray]:
+def associate(t: int, tracks: list[Track], views: FrameViews, cfg: TrackerConfig,
+              prior: tuple[NDArray, NDArray] | None = None) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray, NDArray]:
     """Cost, feasibility and joint assignment of a frame's K views to M tracks at time ``t``.
 
     The cost of a pair, in units of a negative log likelihood, is the sum of three terms:
@@ -169,6 +170,9 @@ def associate(t: int, tracks: list[Track], views: FrameViews, cfg: TrackerConfig
 
     Args:
         views: the frame's views (``host.tracking.measure``).
+        prior: each track's position (M, 2) and covariance (M, 2, 2) at ``t``, where more is known
+            than its prediction (the other cameras' views of the same instant: ``Tracker.update_instant``);
+            None: the tracks' predictions.
 
     Returns:
         ``(rows, cols, colour_d, geo_d, near, body)``: matched view and track indices, the (K, M)
@@ -197,7 +201,7 @@ def associate(t: int, tracks: list[Track], views: FrameViews, cfg: TrackerConfig
     cost = np.where(colour_known, colour_d / cfg.d_max, _UNKNOWN_COLOUR_COST)
     vouched = colour_known
     if cfg.use_geometry:
-        pos, pos_cov = predict_tracks(tracks, t, cfg.accel_std_mps2)  # (M, 2), (M, 2, 2)
+        pos, pos_cov = predict_tracks(tracks, t, cfg.accel_std_mps2) if prior is None else prior  # (M, 2), (M, 2, 2)
         has_pos, pos_std = ~np.isnan(pos[:, 0]), np.sqrt(0.5 * (pos_cov[:, 0, 0] + pos_cov[:, 1, 1]))
         geo_d = np.linalg.norm(ground[:, None, :] - pos[None, :, :], axis=2)  # (K, M)
         radius = cfg.gate_m + np.hypot(sigma[:, None], pos_std[None, :])  # (K, M)

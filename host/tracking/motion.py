@@ -21,7 +21,7 @@ from superbody.host.filtering.kalman import continuous_accel_noise, predict, upd
 if TYPE_CHECKING:
     from superbody.host.tracking.track import Track
 
-__all__ = ["predict_positions", "predict_tracks", "update_positions", "fuse_positions", "INIT_SPEED_STD"]
+__all__ = ["predict_positions", "predict_tracks", "update_positions", "fuse_positions", "posterior", "INIT_SPEED_STD"]
 
 NS_PER_S = 1_000_000_000
 
@@ -105,3 +105,26 @@ def fuse_positions(tracks: list[Track], xy: NDArray, R: NDArray, t_ns: int | NDA
     x, P = update_positions(x, P, xy, R)
     for j, (i, m) in enumerate(zip(rows, old, strict=True)):
         tracks[i].set_motion(x[j], P[j], max(m[2], t_old[j]))
+
+
+def posterior(xy: NDArray, cov: NDArray, z: NDArray, R: NDArray) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """M positions (M, 2) of covariances ``cov`` (M, 2, 2), each updated with up to G floor points
+    ``z`` (M, G, 2) of covariances ``R`` (M, G, 2, 2) (NaN rows: no point), in information form.
+
+    Returns:
+        ``(xy, cov)`` after the points, same shapes; a NaN position stays NaN.
+    """
+    has = np.isfinite(z).all(axis=2) & np.isfinite(R).all(axis=(2, 3))  # (M, G)
+    placed = np.isfinite(xy).all(axis=1) & np.isfinite(cov).all(axis=(1, 2))  # (M,)
+    out_xy, out_cov = xy.copy(), cov.copy()
+    rows = np.flatnonzero(placed & has.any(axis=1))
+    if not len(rows):
+        return out_xy, out_cov
+    eye = np.eye(2)
+    Ri = np.where(has[rows][..., None, None], np.linalg.inv(np.where(has[rows][..., None, None], R[rows], eye)), 0.0)  # (B, G, 2, 2)
+    Pi = np.linalg.inv(cov[rows])  # (B, 2, 2)
+    info = Pi + Ri.sum(axis=1)
+    vec = (Pi @ xy[rows][..., None])[..., 0] + (Ri @ np.where(has[rows][..., None], z[rows], 0.0)[..., None])[..., 0].sum(axis=1)
+    out_cov[rows] = np.linalg.inv(info)
+    out_xy[rows] = (out_cov[rows] @ vec[..., None])[..., 0]
+    return out_xy, out_cov

@@ -3,28 +3,28 @@
 The paper's tracker matches each detected person to a known one when the median Bhattacharyya
 distance between its hue-saturation histogram and that person's last Q histograms is below
 d_max; unmatched detections start candidates, a candidate matched for 2 s becomes a person, and
-a person unseen for 2 s is removed. ``Tracker.update`` runs one camera frame through its stages,
-each a module of its own:
+a person unseen for 2 s is removed. ``Tracker.update_instant`` runs one instant's camera frames
+(``update``: one frame) through its stages, each a module of its own:
 
-1. measure (``host.tracking.measure``): the frame's views with enough joints, one per person
+1. measure (``host.tracking.measure``): each frame's views with enough joints, one per person
    (a detector's double report, a flood of copies: one view), their ground points
    (``host.tracking.ground``) and colours;
-2. associate (``host.tracking.association``): all the frame's views with the tracks at once
-   (``scipy.optimize.linear_sum_assignment``) on colour plus the negative log likelihood of the
-   view's ground point under the track's predicted position (``host.tracking.motion``: a
-   constant-velocity Kalman filter per track) and of the track being reported at all, gated
-   where one body could stand, a cue vouching for each pair;
-3. evidence (``host.tracking.evidence``): each candidate's chance to be seen by this camera, and
+2. associate (``host.tracking.instant``): all the instant's views with the tracks at once, each
+   frame's by joint assignment (``host.tracking.association``) on colour plus the negative log
+   likelihood of the view's ground point under where the track stands (``host.tracking.motion``:
+   a constant-velocity Kalman filter per track, and the instant's other views of it) and of the
+   track being reported at all, gated where one body could stand, a cue vouching for each pair;
+3. evidence (``host.tracking.evidence``): each candidate's chance to be seen by each camera, and
    whether it was;
-4. record the matched views, and start candidates from the rest (``host.tracking.lifecycle``:
-   the birth vetoes, then the confirmation rules, re-identification: ``host.tracking.reid``);
+4. record the matched views, and start candidates from the rest, one per body the instant's
+   cameras agree on (``host.tracking.lifecycle``: the birth vetoes, then the confirmation rules,
+   re-identification: ``host.tracking.reid``);
 5. fuse the views' ground points into their tracks' positions.
 
 Frames come from the host's timeline (``host.timeline``), which admits each frame once and
 releases them in capture order across all cameras; everything runs on capture stamps.
-``prune`` removes the merged and the unseen (``host.tracking.lifecycle``). For each confirmed
-person, ``view_sets`` gives the paper's set S: its latest view per camera, if fresh, and of one
-body (``evidence.one_body``), for the estimator.
+``prune`` removes the merged and the unseen. For each confirmed person, ``view_sets`` gives the
+paper's set S: its latest view per camera, if fresh, and of one body (``evidence.one_body``).
 """
 
 from __future__ import annotations
@@ -40,6 +40,7 @@ from superbody.edge.site import Site
 from superbody.host.tracking.association import Match, associate
 from superbody.host.tracking.config import TrackerConfig
 from superbody.host.tracking.evidence import clearly_sees, off_track, set_s_of_one_body, view_covariance
+from superbody.host.tracking.instant import associate_instant, subset
 from superbody.host.tracking.lifecycle import Lifecycle, Newcomer
 from superbody.host.tracking.measure import FrameViews, measure
 from superbody.host.tracking.motion import NS_PER_S, fuse_positions
@@ -82,66 +83,88 @@ class Tracker:
         return self._life.tracks.get(track_id)
 
     def update(self, obs: Observation) -> list[Match]:
-        """Match one camera frame's people to tracks: its stages, in order.
+        """One camera frame on its own: ``update_instant([obs])``'s matches."""
+        return self.update_instant([obs])[0]
 
-        Frames come in capture order (``host.timeline``). Measure the frame's views (joints,
-        ground points, colours: ``host.tracking.measure``), associate them with the tracks (each
-        track's position predicted to the frame's time: ``association.associate``), count each
-        candidate's chance to be seen (``host.tracking.evidence``), record the matched views,
-        start candidates from the views no track took (``lifecycle.BIRTH_VETOES``), and fuse the
-        ground points into the tracks' positions. Removal is ``prune``'s.
+    def update_instant(self, frames: Sequence[Observation]) -> list[list[Match]]:
+        """Match one instant's camera frames (at most one per camera, in capture order) to tracks: its stages.
 
-        Args:
-            obs: one frame of one camera.
+        Measure each frame's views (joints, ground points, colours: ``host.tracking.measure``);
+        associate all of them with the tracks at once (``instant.associate_instant``); count each candidate's
+        chance to be seen (``host.tracking.evidence``); record the matched views; start
+        candidates from the views no track took, one for each body the instant's cameras agree
+        on (``_births``, ``lifecycle.BIRTH_VETOES``); fuse the ground points into the tracks'
+        positions. Removal is ``prune``'s.
 
         Returns:
-            One ``Match`` per view of ``obs.people``, in order; empty when the frame is not the
-            site's (``stats`` counts "wrong_site" and "unknown_camera").
+            For each frame, one ``Match`` per view of its ``people``, in order; empty for a frame
+            that is not the site's (``stats`` counts "wrong_site" and "unknown_camera").
         """
-        t, st = int(obs.stamp_ns), self.stats
-        st["observations"] += 1
-        if obs.site != self.site.name or obs.camera not in self._cameras:
-            st["wrong_site" if obs.site != self.site.name else "unknown_camera"] += 1
-            return []
-        st["views"] += len(obs.people)
-        tracks = [tr for tr in self._life.tracks.values() if t - tr.last_seen_ns < self._life.remove_ns]
-        views = measure(obs, self._cameras[obs.camera], self.config, st) if obs.people else None
-        matches: list[Match | None] = [None] * len(obs.people)  # the views left None at the end were ignored
-        if views is None or not len(views.idx):
-            self._count_chances(obs.camera, tracks, np.empty(0, np.intp))  # a frame that sees nobody is evidence too
-        else:
-            rows, cols, colour_d, geo_d, near, body = associate(t, tracks, views, self.config)
-            left = np.ones(len(views.idx), dtype=bool)  # the views no track took
+        st, out = self.stats, [list[Match]() for _ in frames]
+        ours = []
+        for f, obs in enumerate(frames):
+            st["observations"] += 1
+            if obs.site != self.site.name or obs.camera not in self._cameras:
+                st["wrong_site" if obs.site != self.site.name else "unknown_camera"] += 1
+            else:
+                st["views"] += len(obs.people)
+                ours.append(f)
+        if not ours:
+            return out
+        t0 = min(int(frames[f].stamp_ns) for f in ours)
+        tracks = [tr for tr in self._life.tracks.values() if t0 - tr.last_seen_ns < self._life.remove_ns]
+        views = {f: measure(frames[f], self._cameras[frames[f].camera], self.config, st) for f in ours if frames[f].people}
+        solved = associate_instant({f: int(frames[f].stamp_ns) for f in views}, views, tracks, self.config)
+        newborn: list[Track] = []
+        for f in ours:
+            obs, t, v = frames[f], int(frames[f].stamp_ns), views.get(f)
+            if v is None or not len(v.idx):
+                self._count_chances(obs.camera, tracks, np.empty(0, np.intp))  # a frame that sees nobody is evidence too
+                out[f] = [Match(i, None, "ignored") for i in range(len(obs.people))]
+                continue
+            rows, cols, colour_d, geo_d, near, body = solved[f]
+            left = np.ones(len(v.idx), dtype=bool)  # the views no track took
             left[rows] = False
             self._count_chances(obs.camera, tracks, cols, glimpsed=np.asarray(body[left].any(axis=0)))
-            fused: list[tuple[Track, int]] = []
-            for r, c in zip(rows, cols, strict=True):
-                tr, i = tracks[c], int(views.idx[r])
-                self._record(tr, obs, t, views, int(r))
-                fused.append((tr, int(r)))
-                matches[i] = Match(i, tr.id, "matched", float(colour_d[r, c]), float(geo_d[r, c]))
-                st["matched"] += 1
-            fused += self._births(obs, t, views, tracks, left, cols, near, matches)
-            self._fuse(fused, views, t)
-        return [Match(i, None, "ignored") if m is None else m for i, m in enumerate(matches)]
+            taken = [(tracks[c], int(r), Match(int(v.idx[r]), tracks[c].id, "matched", float(colour_d[r, c]), float(geo_d[r, c])))
+                     for r, c in zip(rows, cols, strict=True)]
+            st["matched"] += len(taken)
+            for tr, r, _ in taken:  # recorded before any birth: a candidate seen now is not the stalest to evict
+                self._record(tr, obs, t, v, r)
+            born = self._births(t, v, tracks, left, cols, near, newborn)
+            for tr, r, m in born:
+                self._record(tr, obs, t, v, r)
+                st["matched"] += m.status == "matched"
+            taken += born
+            matches: list[Match | None] = [None] * len(obs.people)  # the views left None were ignored
+            for _, _, m in taken:
+                matches[m.view_index] = m
+            self._fuse([(tr, r) for tr, r, _ in taken], v, t)
+            out[f] = [Match(i, None, "ignored") if m is None else m for i, m in enumerate(matches)]
+        return out
 
-    def _births(self, obs: Observation, t: int, views: FrameViews, tracks: list[Track], left: NDArray, cols: NDArray,
-                near: NDArray, matches: list[Match | None]) -> list[tuple[Track, int]]:
-        """A candidate from each view no track took (``left``), where the birth rules allow; the (track, view row) pairs to fuse."""
+    def _births(self, t: int, views: FrameViews, tracks: list[Track], left: NDArray, cols: NDArray, near: NDArray,
+                newborn: list[Track]) -> list[tuple[Track, int, Match]]:
+        """The views no track took (``left``): each joins a candidate this instant's earlier frames
+        started where it matches one (``association.associate``), else starts one where the birth
+        rules allow (``newborn`` gets it); (track, view row, match) for each."""
         unseen = np.ones(len(tracks), dtype=bool)  # tracks this frame did not see
         unseen[cols] = False
-        fused: list[tuple[Track, int]] = []
-        for r in np.flatnonzero(left):
+        out: list[tuple[Track, int, Match]] = []
+        rest = np.flatnonzero(left)
+        if newborn and len(rest):
+            rows, cols_new = associate(t, newborn, subset(views, rest), self.config)[:2]
+            out += [(newborn[c], int(r), Match(int(views.idx[r]), newborn[c].id, "matched")) for r, c in zip(rest[rows], cols_new, strict=True)]
+            rest = np.setdiff1d(rest, rest[rows])
+        for r in rest:
             i = int(views.idx[r])
             newcomer = Newcomer(bool(views.has_colour[r]), bool(views.has_ground[r]), float(views.sigma[r]), int(views.n_joints[i]),
                                 bool((near[r] & unseen).any()))
             tr = self._life.birth(newcomer, t)
-            if tr is None:
-                continue
-            self._record(tr, obs, t, views, int(r))
-            fused.append((tr, int(r)))
-            matches[i] = Match(i, tr.id, "created")
-        return fused
+            if tr is not None:
+                newborn.append(tr)
+                out.append((tr, int(r), Match(i, tr.id, "created")))
+        return out
 
     def _count_chances(self, camera: str, tracks: list[Track], cols: NDArray, glimpsed: NDArray | None = None) -> None:
         """Each placed candidate's chance to be seen in this frame, and whether it was (``host.tracking.evidence``);

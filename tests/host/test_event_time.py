@@ -9,6 +9,7 @@ after its capture, on the host's clock), and with mixed delays it left the late 
 from __future__ import annotations
 
 import dataclasses
+from collections import Counter
 
 import numpy as np
 import pytest
@@ -200,3 +201,28 @@ def test_a_host_that_steps_seldom_estimates_every_view_all_the_same(every_s):
     stepped_each, seldom = seen[0.0], seen[every_s]
     assert len(stepped_each) > 1000
     assert len(seldom & stepped_each) >= 0.98 * len(stepped_each), (len(seldom & stepped_each), len(stepped_each))
+
+
+def test_the_frames_a_step_releases_are_associated_an_instant_at_a_time():
+    # Cameras 0.1-0.6 s late deliver in bunches: the tracker gets each instant's frames together
+    # (Tracker.update_instant), at most one per camera, in capture order, every admitted frame once.
+    world, frames = deliveries([0.1, 0.3, 0.6, 0.45], [15] * 4, 0.05, seed=2)
+    keys = {c: f"superbody/{SITE.name}/cameras/{c}/observations" for c in SITE.camera_ids}
+    agg = Aggregator(SITE, AnalyticEstimator(SITE), "analytic", HostConfig(), start_ns=T0)
+    calls: list[list[tuple[str, int]]] = []
+    update_instant = agg.tracker.update_instant
+
+    def spy(batch):
+        calls.append([(o.camera, o.stamp_ns) for o in batch])
+        return update_instant(batch)
+
+    agg.tracker.update_instant = spy  # type: ignore[method-assign]
+    for arrival, cam, payload in frames:
+        agg.ingest(payload, keys[cam], arrival)
+        agg.step(arrival)
+    agg.step(frames[-1][0] + 2 * S)
+    got = [f for c in calls for f in c]
+    assert len(got) == len(set(got)) == agg.tracker.stats["observations"] > 0.9 * len(frames)
+    assert all(len({cam for cam, _ in c}) == len(c) for c in calls)  # one frame per camera
+    assert got == sorted(got, key=lambda f: f[1])  # capture order, across calls too
+    assert sum(len(c) >= 3 for c in calls) > 50, sorted(Counter(len(c) for c in calls).items())  # bunches come together
