@@ -23,10 +23,11 @@ keep landing inside a candidate's gate. Two physical facts tell them from people
 - **Two people cannot stand inside each other.** A candidate whose position lies within
   ``TrackerConfig.min_separation_m`` of a confirmed person's is that person seen again (a
   detector's second, partial skeleton of them, another camera's odd colours), not a newcomer:
-  it is not confirmed. Two confirmed tracks that stay that close for ``MERGE_AFTER_S``, and that
-  no camera saw in one frame (``seen_together``: two detections in one frame are two bodies), are
-  one person whose views went to two tracks: the younger is removed (``Tracker.prune``). Torsos are about 0.25 m deep and 0.4 m
-  wide, so centres closer than 0.3 m are one body; people standing shoulder to shoulder, or
+  it is not confirmed. Two confirmed tracks that stay that close (or whose views each fit the
+  other's position) for ``merge.MERGE_AFTER_S``, and that no camera saw in one frame
+  (``merge.seen_together``: two detections in one frame are two bodies), are one person whose
+  views went to two tracks: the younger is removed (``host.tracking.merge``). Torsos are about
+  0.25 m deep and 0.4 m wide, so centres closer than 0.3 m are one body; people standing shoulder to shoulder, or
   hugging, stay further apart than that.
 - **A person's views show one body.** Each camera's latest view of a person (set S) was matched
   to them on its own; in a crowd a camera's view of a neighbour (or of a coat on a stand) can join
@@ -48,6 +49,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -57,15 +59,14 @@ from superbody.edge.camera import Camera
 from superbody.edge.floor import visible
 from superbody.edge.site import Obstacle
 from superbody.host.tracking.config import TrackerConfig
-from superbody.host.tracking.motion import NS_PER_S, predict_tracks
+from superbody.host.tracking.motion import fuse_positions, predict_tracks
 from superbody.host.tracking.track import StampedView, Track
 
-__all__ = ["EDGE_MARGIN", "MERGE_AFTER_S", "TORSO_CENTRE_M", "clearly_sees", "corroborated", "too_close", "coincident", "seen_together", "off_track", "one_body", "set_s_of_one_body", "sigmas_from", "squared_sigmas", "view_covariance"]
+__all__ = ["EDGE_MARGIN", "TORSO_CENTRE_M", "clearly_sees", "corroborated", "too_close", "feed_back", "off_track", "one_body", "set_s_of_one_body", "sigmas_from", "squared_sigmas", "view_covariance"]
 
 # Height of a standing adult's torso centre: midway between the hips and the shoulders (edge.body).
 TORSO_CENTRE_M = 0.5 * (TYPICAL_HEIGHT_M[LEFT_HIP] + TYPICAL_HEIGHT_M[LEFT_SHOULDER])
 EDGE_MARGIN = 0.1  # fraction of the image's width and height left out on each side
-MERGE_AFTER_S = 0.5  # how long two confirmed tracks may stand inside each other before they are one
 
 
 def clearly_sees(cam: Camera, xy: NDArray, obstacles: Sequence[Obstacle] = ()) -> NDArray[np.bool_]:
@@ -94,35 +95,6 @@ def too_close(xy: NDArray, others: Sequence[NDArray] | NDArray, min_separation_m
     return np.asarray((np.linalg.norm(xy[:, None, :] - o[None, :, :], axis=2) < min_separation_m).any(axis=1), dtype=bool)
 
 
-def coincident(people: Sequence[Track], now_ns: int, min_separation_m: float) -> list[Track]:
-    """The confirmed tracks that stood within ``min_separation_m`` of an older one for ``MERGE_AFTER_S``.
-
-    Older: confirmed earlier (then the lower id). Each track's ``close_since_ns`` keeps when it
-    came that close (None while it stands apart); a track found here is the younger of a pair
-    and is to be removed, so it is no longer anyone's elder.
-    """
-    placed = sorted((tr for tr in people if tr.motion is not None), key=lambda tr: (tr.confirmed_ns or 0, tr.id))
-    xy = np.array([tr.position for tr in placed]).reshape(-1, 2)
-    close = np.linalg.norm(xy[:, None] - xy[None], axis=2) < min_separation_m  # (M, M)
-    out: list[Track] = []
-    for j, tr in enumerate(placed):
-        elders = [placed[i] for i in np.flatnonzero(close[j, :j])]  # older and close: only these pairs are checked
-        if not any(o not in out and not seen_together(o, tr) for o in elders):
-            tr.close_since_ns = None
-            continue
-        tr.close_since_ns = now_ns if tr.close_since_ns is None else tr.close_since_ns
-        if now_ns - tr.close_since_ns >= MERGE_AFTER_S * NS_PER_S:
-            out.append(tr)
-    return out
-
-
-def seen_together(a: Track, b: Track) -> bool:
-    """Whether some camera's latest frame matched a view to each of the two tracks: two
-    detections in one frame are two people (or one person split by a detector, which the
-    candidate rule catches), never one person whose views went to two tracks."""
-    return any(b.views.get(cam) is not None and b.views[cam].stamp_ns == sv.stamp_ns for cam, sv in a.views.items())
-
-
 def off_track(tracks: Sequence[Track | None], xy: ArrayLike, stamps_ns: Sequence[int], cov: NDArray, cfg: TrackerConfig) -> tuple[NDArray[np.bool_], NDArray, NDArray]:
     """Whether each point (B, 2), of covariance ``cov`` (B, 2, 2), lies where one body could not
     stand: beyond ``same_body_sigmas`` combined 1-sigmas of its track's prediction at its stamp, as
@@ -138,6 +110,28 @@ def off_track(tracks: Sequence[Track | None], xy: ArrayLike, stamps_ns: Sequence
     g, C = xy - pred, pcov + cov
     with np.errstate(invalid="ignore"):  # NaN: nothing to refuse
         return squared_sigmas(g[:, 0], g[:, 1], C[:, 0, 0], C[:, 0, 1], C[:, 1, 1]) > sigmas**2, pred, pcov
+
+
+def feed_back(tracks: Sequence[Track | None], xy: ArrayLike, stamps_ns: Sequence[int], std_m: float,
+              cfg: TrackerConfig) -> tuple[NDArray[np.bool_], int]:
+    """Better positions (B, 2) of 1-sigma ``std_m``, seen at ``stamps_ns``, fused into their tracks'
+    position filters in one batch, but where one body could not stand (``off_track``).
+
+    Returns:
+        (B,) whether each was taken (not where there is no track or the point is not finite), and
+        how many were refused as off the track.
+    """
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    if not (std_m > 0 and math.isfinite(std_m)):
+        return np.zeros(len(xy), dtype=bool), 0
+    ok = np.array([tr is not None for tr in tracks], dtype=bool) & np.isfinite(xy).all(axis=1)
+    R = np.tile(std_m**2 * np.eye(2), (len(xy), 1, 1))
+    far = ok & off_track(tracks, xy, stamps_ns, R, cfg)[0]
+    ok &= ~far
+    if ok.any():
+        idx = np.flatnonzero(ok).tolist()
+        fuse_positions([cast(Track, tracks[i]) for i in idx], xy[idx], R[idx], np.asarray(stamps_ns, dtype=np.int64)[idx], cfg.accel_std_mps2)
+    return ok, int(far.sum())
 
 
 def one_body(views: dict[str, StampedView], near_xy: NDArray | None, sigmas: float, across_m: float = math.inf) -> list[str]:

@@ -25,8 +25,8 @@ person). Counted: ``confirmed``; then ``reidentified`` when it is a person remov
 or a person unseen for over ``confirm_max_gap_s`` whose views it took (that track goes: one body,
 one id; ``host.tracking.reid``).
 
-**Death** (``prune``): ``merged`` (the younger of two confirmed tracks that stood inside each other
-for ``evidence.MERGE_AFTER_S``), ``removed`` (a person unseen for ``remove_after_s``, remembered
+**Death** (``prune``): ``merged`` (the younger of two confirmed tracks that stood inside each other,
+or whose views each fit the other's position, for ``merge.MERGE_AFTER_S``: ``host.tracking.merge``), ``removed`` (a person unseen for ``remove_after_s``, remembered
 for re-identification) and ``dropped_candidates`` (a candidate unseen as long).
 """
 
@@ -36,7 +36,8 @@ from collections.abc import Callable
 from typing import NamedTuple
 
 from superbody.host.tracking.config import TrackerConfig
-from superbody.host.tracking.evidence import coincident, too_close
+from superbody.host.tracking.evidence import too_close
+from superbody.host.tracking.merge import coincident
 from superbody.host.tracking.motion import NS_PER_S
 from superbody.host.tracking.reid import Lost, remember, remembered_as
 from superbody.host.tracking.track import Track
@@ -134,7 +135,7 @@ class Lifecycle:
         """Remove the merged and the unseen (module docstring); return them."""
         cfg = self.config
         people = [tr for tr in self.tracks.values() if tr.state == "confirmed"]
-        merged = coincident(people, now_ns, cfg.min_separation_m) if cfg.min_separation_m > 0 else []
+        merged = coincident(people, now_ns, cfg.min_separation_m, cfg) if cfg.min_separation_m > 0 else []
         for tr in merged:
             del self.tracks[tr.id]
         self.stats["merged"] += len(merged)

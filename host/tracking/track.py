@@ -68,7 +68,7 @@ class Track:
     # where the candidate stood, or matched it (chances), and those that matched it.
     _chances: int = field(default=1, init=False, repr=False)
     _support: int = field(default=1, init=False, repr=False)
-    # Confirmed: since when it has stood inside an older confirmed track (host.tracking.evidence.coincident).
+    # Confirmed: since when it has stood inside an older confirmed track (host.tracking.merge.coincident).
     close_since_ns: int | None = field(default=None, init=False, repr=False)
     # Set S as last checked (evidence.one_body): its (camera, stamp) pairs, and the cameras kept.
     checked_set: tuple[tuple[tuple[str, int], ...], list[str]] | None = field(default=None, init=False, repr=False)

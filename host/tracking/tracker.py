@@ -39,7 +39,7 @@ from superbody.edge.messages.observation import Observation, PersonView
 from superbody.edge.site import Site
 from superbody.host.tracking.association import Match, associate
 from superbody.host.tracking.config import TrackerConfig
-from superbody.host.tracking.evidence import clearly_sees, off_track, set_s_of_one_body, view_covariance
+from superbody.host.tracking.evidence import clearly_sees, feed_back, off_track, set_s_of_one_body, view_covariance
 from superbody.host.tracking.instant import associate_instant, subset
 from superbody.host.tracking.lifecycle import Lifecycle, Newcomer
 from superbody.host.tracking.measure import FrameViews, measure
@@ -87,14 +87,8 @@ class Tracker:
         return self.update_instant([obs])[0]
 
     def update_instant(self, frames: Sequence[Observation]) -> list[list[Match]]:
-        """Match one instant's camera frames (at most one per camera, in capture order) to tracks: its stages.
-
-        Measure each frame's views (joints, ground points, colours: ``host.tracking.measure``);
-        associate all of them with the tracks at once (``instant.associate_instant``); count each candidate's
-        chance to be seen (``host.tracking.evidence``); record the matched views; start
-        candidates from the views no track took, one for each body the instant's cameras agree
-        on (``_births``, ``lifecycle.BIRTH_VETOES``); fuse the ground points into the tracks'
-        positions. Removal is ``prune``'s.
+        """Match one instant's camera frames (at most one per camera, in capture order) to tracks:
+        the stages of the module docstring, in order. Removal is ``prune``'s.
 
         Returns:
             For each frame, one ``Match`` per view of its ``people``, in order; empty for a frame
@@ -220,19 +214,8 @@ class Tracker:
         Returns:
             (B,) bool, False where there is no such track, the point is not finite, or it was refused.
         """
-        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        if not (std_m > 0 and math.isfinite(std_m)):
-            return np.zeros(len(xy), dtype=bool)
-        tracks = [self._life.tracks.get(int(i)) for i in track_ids]
-        ok = np.array([tr is not None for tr in tracks], dtype=bool) & np.isfinite(xy).all(axis=1)
-        R = np.tile(std_m**2 * np.eye(2), (len(xy), 1, 1))
-        far = ok & off_track(tracks, xy, stamps_ns, R, self.config)[0]
-        ok &= ~far
-        self.stats["feedback_refused"] += int(far.sum())
-        if ok.any():
-            idx = np.flatnonzero(ok)
-            fuse_positions([tracks[i] for i in idx], xy[idx], R[idx], np.asarray(stamps_ns, dtype=np.int64)[idx],  # type: ignore[misc]
-                           self.config.accel_std_mps2)
+        ok, refused = feed_back([self._life.tracks.get(int(i)) for i in track_ids], xy, stamps_ns, std_m, self.config)
+        self.stats["feedback_refused"] += refused
         return ok
 
     def off_track(self, track_ids: Sequence[int], xy: ArrayLike, stamps_ns: Sequence[int], cov: NDArray) -> tuple[NDArray[np.bool_], NDArray, NDArray]:
@@ -242,7 +225,7 @@ class Tracker:
 
     def prune(self, now_ns: int) -> list[Track]:
         """Remove tracks unseen for ``remove_after_s``, and the younger of two confirmed tracks that
-        stood inside each other for ``MERGE_AFTER_S`` (``host.tracking.lifecycle``); return them."""
+        are one person (``host.tracking.merge``); return them."""
         return self._life.prune(now_ns)
 
     def people(self, now_ns: int) -> list[Track]:

@@ -10,7 +10,8 @@ from superbody.edge.body import NUM_KEYPOINTS
 from superbody.edge.messages.observation import Observation
 from superbody.edge.site import Site
 from superbody.host.tracking.config import TrackerConfig
-from superbody.host.tracking.evidence import EDGE_MARGIN, MERGE_AFTER_S, clearly_sees, coincident, too_close
+from superbody.host.tracking.evidence import EDGE_MARGIN, clearly_sees, too_close
+from superbody.host.tracking.merge import MERGE_AFTER_S, coincident
 from superbody.host.tracking.track import Track
 from superbody.host.tracking.tracker import Tracker
 from tests.host.tracking.test_tracker import C1, C2, C3, CAMS, SITE, T0, S, frame, make_camera, schedule
@@ -71,6 +72,27 @@ def test_the_younger_of_two_coincident_tracks_goes_after_a_while_and_only_then()
     assert coincident(people, 10 * S + int(MERGE_AFTER_S * S), 0.3) == [young]
     young.set_motion(np.array([(0.5, 0.0), (0.0, 0.0)]), np.eye(4), 20 * S)  # walked apart: the clock restarts
     assert coincident(people, 20 * S, 0.3) == [] and young.close_since_ns is None
+
+
+@pytest.mark.parametrize("offset, merged", [((0.45, 0.0), True), ((0.0, 0.45), False)])
+def test_two_tracks_whose_views_each_explain_the_other_are_one_person(offset, merged):
+    """One person, each camera's views gone to a track of their own (scene m: a person in the
+    doorway, one camera's views 0.3 m further along its line of sight than another's): 0.45 m
+    apart, over ``min_separation_m``, but along both cameras' lines of sight, where a view's range
+    is unsure (0.3 m), every view fits the other track too. Across them (0.08 m) it does not."""
+    from superbody.host.tracking.track import StampedView
+
+    old, young = _placed(1, (0.0, 0.0), 1 * S), _placed(2, offset, 2 * S)
+    view = object()  # the views' joints do not matter here, only their ground points
+    cfg, got = TrackerConfig(), []
+    for now in (10 * S, 10 * S + int(MERGE_AFTER_S * S)):  # seen again just now, each by its camera
+        for tr, cam, xy in ((old, "c1", (0.0, 0.0)), (young, "c2", offset)):
+            tr.set_motion(np.array([xy, [0.0, 0.0]]), 0.05**2 * np.eye(4), now - 10_000_000)
+            tr.views[cam] = StampedView(now - 10_000_000, view, xy, 0.3, (4.0, 0.0) if cam == "c1" else (-4.0, 0.0))  # type: ignore[arg-type]
+            tr.last_seen_ns = now - 10_000_000
+        got.append(coincident([old, young], now, 0.3, cfg))
+    assert got == [[], [young] if merged else []]  # as close as one body from the first, or never
+    assert coincident([old, young], 11 * S, 0.3) == []  # the distance alone: two people
 
 
 # --- through the tracker ------------------------------------------------------------------------
