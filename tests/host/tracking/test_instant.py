@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import numpy as np
+
+from superbody.host.tracking.motion import posterior, update_positions
 from superbody.host.tracking.tracker import Tracker
 from tests.host.tracking.test_tracker import C1, C2, C3, CAMS, SITE, T0, S, frame, run, schedule
 
@@ -39,3 +42,21 @@ def test_the_other_cameras_of_the_instant_decide_a_view_the_predictions_cannot()
     assert names1 == ["a"] and [m.track_id for m in matches[0]] == [a]
     for ms, (_, names) in zip(matches[1:], rest, strict=True):
         assert {names[m.view_index]: m.track_id for m in ms} == {"a": a, "b": b}
+
+
+def test_a_posterior_in_information_form_is_the_kalman_filter_point_after_point():
+    rng = np.random.default_rng(3)
+    xy, cov = rng.normal(size=(3, 2)), np.array([np.diag([0.2, 0.5]), np.eye(2), [[0.3, 0.1], [0.1, 0.2]]])
+    z = rng.normal(size=(3, 2, 2))
+    R = np.array([[[[0.04, 0.01], [0.01, 0.09]], 0.5 * np.eye(2)]] * 3)
+    z[1, 1] = np.nan  # the second track has one point, the first and third two
+    got_xy, got_cov = posterior(xy, cov, z, R)
+    for m in range(3):
+        x, P = np.array([xy[m], [0.0, 0.0]])[None], np.zeros((1, 4, 4))
+        P[0, :2, :2], P[0, 2:, 2:] = cov[m], np.eye(2)
+        for g in range(2):
+            if np.isfinite(z[m, g]).all():
+                x, P = update_positions(x, P, z[m, g][None], R[m, g][None])
+        assert np.allclose(got_xy[m], x[0, 0]) and np.allclose(got_cov[m], P[0, :2, :2])
+    nowhere = np.full((1, 2), np.nan)
+    assert np.isnan(posterior(nowhere, np.full((1, 2, 2), np.nan), z[:1], R[:1])[0]).all()  # no position: none after
