@@ -212,12 +212,13 @@ def view_covariance(xy: NDArray, std: NDArray, camera_xy: NDArray, across_m: flo
 
 def sigmas_from(ground: NDArray, std: NDArray, camera_xy: NDArray, xy: NDArray, cov: NDArray,
                 across_m: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(K, M) how many combined 1-sigmas each of one camera's K ground points lies from each of M
+    """(K, M) how many combined 1-sigmas each of K ground points lies from each of M
     predicted positions: the views' error as in ``one_body`` (``view_covariance``) plus each
     prediction's (``cov``). NaN where a point or a prediction is unknown.
 
     Args:
-        ground: (K, 2) ground points; std: (K,) their 1-sigma; camera_xy: (2,) the camera's floor point.
+        ground: (K, 2) ground points; std: (K,) their 1-sigma; camera_xy: (2,) the camera's floor
+            point, or (K, 2) each point's camera's.
         xy: (M, 2) predicted positions; cov: (M, 2, 2) their covariances, m^2.
 
     Returns:

@@ -41,12 +41,15 @@ def associate_instant(stamps: dict[int, int], views: dict[int, FrameViews], trac
     they were heading: the views of one body are found in the solve, not checked after it.
     """
     frames = [f for f, v in views.items() if len(v.idx)]
-    solved = {f: associate(stamps[f], tracks, views[f], cfg) for f in frames}
     if len(frames) < 2 or not tracks or not cfg.use_geometry:
-        return solved
+        return {f: associate(stamps[f], tracks, views[f], cfg) for f in frames}
     m = len(tracks)
-    priors = {f: predict_tracks(tracks, stamps[f], cfg.accel_std_mps2) for f in frames}
+    priors = {f: predict_tracks(tracks, stamps[f], cfg.accel_std_mps2) for f in frames}  # predicted once, for every pass
+    solved = {f: associate(stamps[f], tracks, views[f], cfg, prior=priors[f]) for f in frames}
     covs = {f: view_covariance(views[f].ground, views[f].sigma, views[f].camera_xy, cfg.same_body_across_m) for f in frames}
+    # another frame's point, seen up to a frame period earlier or later: the walk since as extra noise
+    t = np.array([stamps[f] for f in frames], dtype=np.float64) / NS_PER_S
+    walk = (INIT_SPEED_STD * (t[None, :] - t[:, None])) ** 2  # (F, F) variance added to frame h's point seen from frame g
     for _ in range(_PASSES - 1):
         z, R = np.full((len(frames), m, 2), np.nan), np.full((len(frames), m, 2, 2), np.nan)  # each frame's point of each track
         for g, f in enumerate(frames):
@@ -56,9 +59,7 @@ def associate_instant(stamps: dict[int, int], views: dict[int, FrameViews], trac
         new = {}
         for g, f in enumerate(frames):
             others = np.arange(len(frames)) != g
-            # another frame's point, seen up to a frame period earlier or later: the walk since as extra noise
-            dt = np.array([(stamps[h] - stamps[f]) / NS_PER_S for h in frames])[others]
-            Rf = R[others] + ((INIT_SPEED_STD * dt) ** 2)[:, None, None, None] * np.eye(2)
+            Rf = R[others] + walk[g, others][:, None, None, None] * np.eye(2)
             prior = posterior(*priors[f], z[others].transpose(1, 0, 2), Rf.transpose(1, 0, 2, 3))
             new[f] = associate(stamps[f], tracks, views[f], cfg, prior=prior)
         same = all(np.array_equal(new[f][0], solved[f][0]) and np.array_equal(new[f][1], solved[f][1]) for f in frames)

@@ -52,20 +52,18 @@ def coincident(people: Sequence[Track], now_ns: int, min_separation_m: float, cf
 def _explained(tracks: Sequence[Track], now_ns: int, cfg: TrackerConfig) -> NDArray[np.bool_]:
     """(M, M): whether each track's latest views (those of its last ``MERGE_AFTER_S``) all put
     their person within ``same_body_sigmas`` of each track's position at ``now_ns`` (``sigmas_from``)."""
-    m = len(tracks)
     pos, cov = predict_tracks(list(tracks), now_ns, cfg.accel_std_mps2)  # all at one time
-    out = np.zeros((m, m), dtype=bool)
-    for i, tr in enumerate(tracks):
-        vs = [sv for sv in tr.views.values() if tr.last_seen_ns - sv.stamp_ns <= MERGE_AFTER_S * NS_PER_S and np.isfinite(sv.ground_std_m)]
-        if not vs:
-            continue
-        g = np.array([sv.ground_xy for sv in vs])
-        std = np.array([sv.ground_std_m for sv in vs])
-        worst = np.zeros(m)
-        for k, sv in enumerate(vs):
-            sig, _ = sigmas_from(g[k:k + 1], std[k:k + 1], np.array(sv.camera_xy), pos, cov, cfg.same_body_across_m)
-            worst = np.fmax(worst, np.nan_to_num(sig[0], nan=np.inf))
-        out[i] = worst <= cfg.same_body_sigmas
+    views = [(i, sv) for i, tr in enumerate(tracks) for sv in tr.views.values()
+             if tr.last_seen_ns - sv.stamp_ns <= MERGE_AFTER_S * NS_PER_S and np.isfinite(sv.ground_std_m)]
+    out = np.zeros((len(tracks), len(tracks)), dtype=bool)
+    if not views:
+        return out
+    owner = np.array([i for i, _ in views])
+    sig, _ = sigmas_from(np.array([sv.ground_xy for _, sv in views]), np.array([sv.ground_std_m for _, sv in views]),
+                         np.array([sv.camera_xy for _, sv in views]), pos, cov, cfg.same_body_across_m)  # (V, M)
+    fits = np.nan_to_num(sig, nan=np.inf) <= cfg.same_body_sigmas
+    for i in np.unique(owner):
+        out[i] = fits[owner == i].all(axis=0)
     return out
 
 

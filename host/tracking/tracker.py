@@ -130,11 +130,10 @@ class Tracker:
                 self._record(tr, obs, t, v, r)
                 st["matched"] += m.status == "matched"
             taken += born
-            matches: list[Match | None] = [None] * len(obs.people)  # the views left None were ignored
+            out[f] = [Match(i, None, "ignored") for i in range(len(obs.people))]  # but the views taken:
             for _, _, m in taken:
-                matches[m.view_index] = m
+                out[f][m.view_index] = m
             self._fuse([(tr, r) for tr, r, _ in taken], v, t)
-            out[f] = [Match(i, None, "ignored") if m is None else m for i, m in enumerate(matches)]
         return out
 
     def _births(self, t: int, views: FrameViews, tracks: list[Track], left: NDArray, cols: NDArray, near: NDArray,
