@@ -297,14 +297,42 @@ def test_seeds_parse_ranges_and_lists_and_refuse_nonsense():
 def test_seeds_summary_counts_the_seeds_that_met_the_bar():
     from benchmarks.scene_seeds import _tail, summarise
 
-    def run(seed, met, sw, extra, yaw90):
-        return "k", seed, {"estimators": {"analytic": {"meets_bar": met, "id_switches": sw, "extra_tracks": extra, "yaw_deg_p90": yaw90}}}
+    def run(seed, met, sw, extra, yaw90, pos50=20.0):
+        r = {"meets_bar": met, "id_switches": sw, "extra_tracks": extra, "yaw_deg_p90": yaw90, "recall": 1.0,
+             "false_positive_share": 0.0, "position_mm_p50": pos50, "yaw_deg_p50": 2.0}
+        return "k", seed, {"calibration_mm": 31.4, "estimators": {"analytic": r}}
 
-    got = summarise([run(1, True, 0, 0, 6.5), run(2, False, 3, 1, 31.0), run(3, True, 0, 0, 7.0)])
-    assert got == {("k", "analytic"): {"seeds": 3, "met": 2, "missed": [2], "id_switches": 3, "extra_tracks": 1,
-                                       "yaw_p90": {1: 6.5, 2: 31.0, 3: 7.0}}}
-    assert _tail(got["k", "analytic"]["yaw_p90"]) == "yaw p90 median 7.0 deg, worst 31.0 (seed 2)"
+    got = summarise([run(1, True, 0, 0, 6.5), run(2, False, 3, 1, 31.0), run(3, True, 0, 0, 7.0), run(4, False, 0, 0, 5.0, pos50=37.2)])
+    assert got == {("k", "analytic"): {"seeds": 4, "met": 2, "missed": [2, 4], "id_switches": 3, "extra_tracks": 1,
+                                       "why": {2: ["switches 3", "extra tracks 1"], 4: ["position 37 mm (calibration alone 31 mm)"]},
+                                       "yaw_p90": {1: 6.5, 2: 31.0, 3: 7.0, 4: 5.0}}}
+    assert _tail(got["k", "analytic"]["yaw_p90"]) == "yaw p90 median 6.8 deg, worst 31.0 (seed 2)"
     assert _tail({4: math.nan}) == "yaw p90 unknown"
+
+
+def test_the_bar_names_what_a_run_missed():
+    s = {"recall": 0.94, "id_switches": 0, "extra_tracks": 2, "false_positive_share": 0.01, "position_mm_p50": 35.0, "yaw_deg_p50": 7.2}
+    assert scenes.bar_misses(s) == ["recall 0.940", "extra tracks 2", "yaw 7.2 deg"]
+    assert not scenes.meets_bar(s)
+    assert scenes.meets_bar({**s, "recall": 0.95, "extra_tracks": 0, "yaw_deg_p50": 7.0})
+
+
+def test_the_calibrations_own_position_error_is_what_its_cameras_shift_puts_in(monkeypatch):
+    import dataclasses
+
+    k = scenes.SCENES["k"]()
+    assert scenes.calibration_floor_mm(dataclasses.replace(k, calibration_error=(0.0, 0.0)), 1) == 0.0
+    # Every camera 3 cm off along x: a shift no image shows, so every person is placed 3 cm off.
+    def shifted(site, degrees, metres, seed):
+        return dataclasses.replace(site, cameras=tuple(dataclasses.replace(c, position=(c.position[0] + 0.03, *c.position[1:]))
+                                                       for c in site.cameras))
+
+    monkeypatch.setattr(scenes, "miscalibrated", shifted)
+    assert scenes.calibration_floor_mm(k, 1) == pytest.approx(30.0, abs=0.1)
+    monkeypatch.undo()
+    # Cameras off each their own way: the draw of the seed, smaller than their shifts where they cancel out.
+    one, two = (scenes.calibration_floor_mm(dataclasses.replace(k, calibration_error=(0.0, m)), 14) for m in (0.02, 0.04))
+    assert 5.0 < one < 40.0 and two == pytest.approx(2 * one, rel=0.1)
 
 
 def test_seeds_benchmark_runs_as_its_own_process():
