@@ -19,7 +19,9 @@ Beyond the plain filter (each can be turned off in ``FilterConfig``):
   over speed squared). That spread is one fact about a walk, not one per frame: the prior counts
   as independent once per ``walk_prior_time_s``, so at a frame interval dt its variance is
   multiplied by ``walk_prior_time_s / dt``. A prior weighted by its uncertainty, never a
-  replacement: a person who walks sideways or backwards is still measured by the views.
+  replacement: a person who walks sideways or backwards is still measured by the views. A yaw
+  no view measures (``meas_std`` yaw inf) turns only with the walk: once the prior no longer
+  applies, its rate is 0.
 - **No single measurement moves a track far.** A measurement more than ``outlier_sigma``
   standard deviations of its innovation from the prediction (one bad view: a 180-degree yaw
   flip, a position from the wrong person) counts with its variance multiplied by d / k (d its
@@ -375,7 +377,16 @@ def _step(filters: Sequence[PoseFilter], t_ns: NDArray, pose: NDArray, std: NDAr
     gate = np.array([f.config.outlier_sigma for f in filters])[:, None]  # (n, 1)
     R = np.square(np.where(np.isinf(std), _NO_YAW_STD, std))  # no yaw: a variance that moves nothing
     pos, rate, cov = cv_update(pos, rate, cov, z, _huber(R, z - pos, cov.p00, gate))
-    pos, rate, cov = _walking_prior(filters, pos, rate, cov, dt)
+    pos, rate, cov, walking = _walking_prior(filters, pos, rate, cov, dt)
+    # A yaw no view measures turns only with the walk: where the prior no longer applies either,
+    # nothing measures a turn, and a rate the prior set (a position that stepped 0.15 m, a person
+    # whose side left every view, is a walk of 0.5 m/s to the filter for a few frames) would turn
+    # a person standing still for as long as nothing is measured (10 deg/s: test_aggregator.py).
+    still = np.isinf(std[:, 2]) & ~walking
+    if still.any():
+        rate, cov = rate.copy(), AxisCov(*(f.copy() for f in cov))
+        rate[still, 2] = 0.0
+        cov.p01[still, 2] = cov.p10[still, 2] = 0.0
     pos[:, 2] = wrap_angle(pos[:, 2])
     # Without yaw measurements the yaw's variance would grow without end (past the PoseArray's
     # limit within two minutes); an angle's is pi^2 at most: the yaw axis's block is scaled down.
@@ -398,14 +409,17 @@ def _huber(R: NDArray, innovation: NDArray, p00: NDArray, k: NDArray) -> NDArray
         return np.where((k > 0) & (d > k), R * d / k, R)
 
 
-def _walking_prior(filters: Sequence[PoseFilter], pos: NDArray, rate: NDArray, cov: AxisCov, dt: NDArray) -> tuple[NDArray, NDArray, AxisCov]:
-    """The yaw of each moving filter updated with its walking direction (module docstring)."""
+def _walking_prior(filters: Sequence[PoseFilter], pos: NDArray, rate: NDArray, cov: AxisCov,
+                   dt: NDArray) -> tuple[NDArray, NDArray, AxisCov, NDArray]:
+    """The yaw of each moving filter updated with its walking direction (module docstring), and
+    (n,) which filters walk (faster than ``walk_min_speed_mps``, the prior on)."""
     c = [f.config for f in filters]
     sigma = np.array([x.walk_yaw_std_rad for x in c])
     speed = np.hypot(rate[:, 0], rate[:, 1])  # (n,)
-    moving = (sigma > 0) & (speed > np.array([x.walk_min_speed_mps for x in c])) & (dt > 0)
+    walking = (sigma > 0) & (speed > np.array([x.walk_min_speed_mps for x in c]))
+    moving = walking & (dt > 0)
     if not moving.any():
-        return pos, rate, cov
+        return pos, rate, cov, walking
     i = np.flatnonzero(moving)
     heading = np.arctan2(rate[i, 1], rate[i, 0])
     # the heading's own variance: the speed's variance across the direction, over speed^2
@@ -420,4 +434,4 @@ def _walking_prior(filters: Sequence[PoseFilter], pos: NDArray, rate: NDArray, c
     fields = [f.copy() for f in cov]
     for f, new in zip(fields, yc, strict=True):
         f[i, 2] = new
-    return pos, rate, AxisCov(*fields)
+    return pos, rate, AxisCov(*fields), walking

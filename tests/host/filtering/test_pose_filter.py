@@ -315,6 +315,26 @@ def test_standing_still_gives_no_walking_prior():
     assert math.degrees(f.predict_to(f.stamp_ns).yaw) == pytest.approx(70, abs=0.5)
 
 
+def test_an_unmeasured_yaw_turns_only_with_the_walk():
+    # A person standing at 2 rad whose side then leaves every view: the position steps 0.15 m (the
+    # torso's centre from one side's joints) and no yaw is measured. The step is a walk of 0.5 m/s
+    # to the filter for a few frames; the walking prior then set the yaw turning at 10 deg/s, and
+    # nothing measured stopped it. Now the turn stops with the walk.
+    f = PoseFilter()
+    for k in range(30):
+        f.update(k * S // 15, 0.0, 0.0, 2.0, (0.05, 0.05, 0.1))
+    for k in range(30, 60):
+        p = f.update(k * S // 15, 0.15, 0.1, 0.0, (0.05, 0.05, math.inf))
+    assert abs(p.yaw - 2.0) < math.radians(8) and p.yaw_rate == 0.0
+    # A walker with no yaw measured is still turned to where they walk (the prior's whole use then).
+    g = PoseFilter()
+    for k in range(30):
+        g.update(k * S // 15, 0.1 * k, 0.0, 2.0, (0.05, 0.05, 0.1))
+    for k in range(30, 60):
+        q = g.update(k * S // 15, 0.1 * k, 0.0, 0.0, (0.05, 0.05, math.inf))
+    assert abs(q.yaw) < 1.0
+
+
 @pytest.mark.parametrize("outlier_sigma, moved_max_m", [(3.0, 0.25), (0.0, None)])
 def test_one_bad_measurement_does_not_move_a_track_far(outlier_sigma, moved_max_m):
     f = PoseFilter(FilterConfig(outlier_sigma=outlier_sigma, walk_yaw_std_rad=0.0))
