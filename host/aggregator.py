@@ -7,9 +7,10 @@ measures each camera's delivery delay and frame rate; ``camera_liveliness()`` ad
 site's own cameras, so no name a peer puts in a liveliness key ever reaches an encoder.
 ``step()`` moves the watermark (the newest capture instant every camera still delivering has
 delivered up to), feeds the tracker the frames captured up to it in capture order (a bounded
-number per step), prunes, takes each confirmed person's set S as of that instant (their latest
-view per camera, fresh then; and, where the step released several frames of a camera, as of the
-end of each instant before, so no view goes unestimated however seldom the host steps),
+number per step), an instant at a time (every delivering camera's frame of it together; an
+instant the watermark has not wholly passed waits for the next step), prunes, takes each confirmed
+person's set S as of the end of each instant (their latest view per camera, fresh then, so no
+view goes unestimated however seldom the host steps),
 estimates the people whose views changed in one batched call per instant, filters (each
 estimate taken at the mean capture time of its views, the pose predicted on to the newest
 view's time), and returns the PoseArray. So a late camera's views are fused with the
@@ -164,9 +165,10 @@ class Aggregator:
         self._filters: dict[int, PoseFilter] = {}
         self._last_input: dict[int, int] = {}  # track -> newest view stamp already estimated
         self._poses: dict[int, tuple[pose_msg.PersonPose, int]] = {}  # track -> (pose, newest stamp)
-        self._instant: set[str] = set()  # cameras released since the last instant's end
-        self._instant_ns = 0  # capture time of the last frame released
+        self._open: list[Observation] = []  # the frames of the instant still open: released, not associated yet
+        self._fused_ns: int | None = None  # capture time of the last frame associated
         self._cam_size = {c.id: (c.width, c.height) for c in site.cameras}
+        self._cam_order = {c.id: i for i, c in enumerate(site.cameras)}
         self._seq = 0
         # Reached by one call per instant estimated: the estimator's own sigmas and sources, or its poses with the
         # host's estimator name as every person's source.
@@ -236,28 +238,29 @@ class Aggregator:
         """Fuse the frames the watermark passed, prune, estimate the people with new views, filter,
         and build the PoseArray as of the fused instant (``as_of_ns``).
 
-        The frames come in capture order. Where a camera's next frame comes before the step's end,
-        every camera's view of the instant before it is in: its frames are associated with the
-        people together (``Tracker.update_instant``) and the people estimated as of that instant
-        (``_estimate_sets``), so a set S of one instant is estimated before the next frame replaces
-        one of its views, as well as the set as of the step's end. The frames of an instant the
-        step's end cuts are associated then, the rest with the next step's."""
+        The frames come in capture order and are grouped into instants: an instant ends when every
+        camera still delivering (``Timeline.delivering``) has a frame in it, or before a camera's
+        next frame, or before a frame of the site's first delivering camera (so two hosts fed the
+        same frames group them alike, wherever each started). Then, and only then, its frames are
+        associated with the people together
+        (``Tracker.update_instant``) and the people estimated as of its end (``_estimate_sets``), so
+        a set S of one instant is estimated before the next frame replaces one of its views. An
+        instant still open at the step's end is held for the next step (at most one frame per
+        camera) and the PoseArray describes the instant before it: however the cameras deliver
+        (at once, in bunches, late), the tracker sees the same instants."""
         self.timeline.watermark(now_ns)
-        frames: list[Observation] = []  # the instant's frames not associated yet
+        delivering = self.timeline.delivering(now_ns)
+        first = min(delivering, key=self._cam_order.__getitem__, default=None)
         for obs in self.timeline.release(self.config.max_frames_per_step):
-            if obs.camera in self._instant:
-                if frames:
-                    self.tracker.update_instant(frames)
-                    frames.clear()
-                self._estimate_sets(self._instant_ns)
-                self._instant.clear()
-            self._instant.add(obs.camera)
-            self._instant_ns = int(obs.stamp_ns)
-            frames.append(obs)
-        if frames:
-            self.tracker.update_instant(frames)
+            if self._open and (obs.camera == first or any(f.camera == obs.camera for f in self._open)):
+                self._close_instant()  # an instant starts at the site's first delivering camera, and has one frame per camera
+            self._open.append(obs)
+            if delivering <= {f.camera for f in self._open}:  # every camera that delivers is in: it ends here
+                self._close_instant()
         t = self.timeline.released_to()
         assert t is not None  # the watermark has been moved
+        if self._open:  # the people as of the last instant associated
+            t = min(t, self._fused_ns if self._fused_ns is not None else int(self._open[0].stamp_ns) - 1)
         self.as_of_ns = t
         for tr in self.tracker.prune(t):
             self._watched.pop(tr.id, None)
@@ -271,6 +274,13 @@ class Aggregator:
             site=self.site.name, seq=self._seq, stamp_ns=now_ns, people=people, latency_ns=max(0, int(now_ns) - t),
             cameras_alive=tuple(sorted(self.cameras_alive)), estimator=self.estimator_name,
         )
+
+    def _close_instant(self) -> None:
+        """Associate the open instant's frames with the people together and estimate the people as of its end."""
+        self.tracker.update_instant(self._open)
+        self._fused_ns = int(self._open[-1].stamp_ns)
+        self._open = []
+        self._estimate_sets(self._fused_ns)
 
     def _estimate_sets(self, t: int) -> dict[int, dict[str, PersonView]]:
         """Estimate and filter the people whose set S as of ``t`` holds a view not estimated yet; return every set S."""

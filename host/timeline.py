@@ -300,6 +300,11 @@ class Timeline:
             self._mark_ns = mark
         return self._mark_ns
 
+    def delivering(self, now_ns: int) -> set[str]:
+        """The cameras the watermark waits for at ``now_ns``: those that delivered within ``max_delay_s``."""
+        floor = int(now_ns) - self._max_delay_ns
+        return {cid for cid, c in self.cameras.items() if c.heard_ns is not None and c.heard_ns >= floor}
+
     def release(self, limit: int) -> list[Observation]:
         """The admitted frames captured up to the watermark, in capture order (at most ``limit``)."""
         out: list[Observation] = []

@@ -21,11 +21,13 @@ clock injected:
 3. each sample is scored at its capture time (its first, earliest view's stamp, as
    ``models.data.wtf`` defines it, which is also its truth's time): on the first PoseArray as of
    that time or later (``Aggregator.as_of_ns``, the host's watermark: it fuses every camera up to
-   it, in capture order), so the host has seen every view captured up to then (and, as live, the
-   views of that sample's slower cameras, up to about 0.2 s later in dev.json). The sample's other views, captured a few milliseconds (at most about 0.2 s
-   in dev.json) later, count for the next sample; the per-frame estimate does use them.
-   ``at="last"`` scores once the sample's last view is in instead (the same views as the
-   per-frame estimate, but a pose up to that much younger than the truth).
+   it, in capture order), so the host has seen every view captured up to then. As live, the host
+   holds an instant until every camera's frame of it is in (``Aggregator.step``), so that array
+   describes the sample's instant whole: its other views too, captured up to about 0.2 s later in
+   dev.json (until December 2026 they counted for the next sample, and the array held the other
+   cameras' views of the sample before). ``at="last"`` scores once the sample's last view is in
+   instead (the same views as the per-frame estimate, but a pose up to that much younger than
+   the truth); with the held instants the two mostly agree.
 
 Which person is the sample's (``SOURCES``):
 
