@@ -80,7 +80,7 @@ def summarise(runs: Sequence[tuple[str, int, dict]]) -> dict[tuple[str, str], di
                 s["missed"].append(seed)
                 why = bar_misses(r)
                 cal = sc.get("calibration_mm", math.nan)
-                s["why"][seed] = [f"{w} (calibration alone {cal:.0f} mm)" if w.startswith("position") and cal > 0 else w for w in why]
+                s["why"][seed] = [f"{w}, calibration alone {cal:.0f} mm" if w.startswith("position") and cal > 0 else w for w in why]
             s["id_switches"] += int(r["id_switches"])
             s["extra_tracks"] += int(r["extra_tracks"])
             s["yaw_p90"][seed] = float(r.get("yaw_deg_p90", math.nan))

@@ -304,7 +304,7 @@ def test_seeds_summary_counts_the_seeds_that_met_the_bar():
 
     got = summarise([run(1, True, 0, 0, 6.5), run(2, False, 3, 1, 31.0), run(3, True, 0, 0, 7.0), run(4, False, 0, 0, 5.0, pos50=37.2)])
     assert got == {("k", "analytic"): {"seeds": 4, "met": 2, "missed": [2, 4], "id_switches": 3, "extra_tracks": 1,
-                                       "why": {2: ["switches 3", "extra tracks 1"], 4: ["position 37 mm (calibration alone 31 mm)"]},
+                                       "why": {2: ["switches 3", "extra tracks 1"], 4: ["position 37 mm, calibration alone 31 mm"]},
                                        "yaw_p90": {1: 6.5, 2: 31.0, 3: 7.0, 4: 5.0}}}
     assert _tail(got["k", "analytic"]["yaw_p90"]) == "yaw p90 median 6.8 deg, worst 31.0 (seed 2)"
     assert _tail({4: math.nan}) == "yaw p90 unknown"
