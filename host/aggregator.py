@@ -167,6 +167,7 @@ class Aggregator:
         self._poses: dict[int, tuple[pose_msg.PersonPose, int]] = {}  # track -> (pose, newest stamp)
         self._open: list[Observation] = []  # the frames of the instant still open: released, not associated yet
         self._fused_ns: int | None = None  # capture time of the last frame associated
+        self._sets: tuple[int, dict[int, dict[str, PersonView]]] | None = None  # the last sets S estimated, and as of when
         self._cam_size = {c.id: (c.width, c.height) for c in site.cameras}
         self._cam_order = {c.id: i for i, c in enumerate(site.cameras)}
         self._seq = 0
@@ -278,13 +279,21 @@ class Aggregator:
     def _close_instant(self) -> None:
         """Associate the open instant's frames with the people together and estimate the people as of its end."""
         self.tracker.update_instant(self._open)
+        self._sets = None  # the tracker has changed
         self._fused_ns = int(self._open[-1].stamp_ns)
         self._open = []
         self._estimate_sets(self._fused_ns)
 
     def _estimate_sets(self, t: int) -> dict[int, dict[str, PersonView]]:
-        """Estimate and filter the people whose set S as of ``t`` holds a view not estimated yet; return every set S."""
+        """Estimate and filter the people whose set S as of ``t`` holds a view not estimated yet; return every set S.
+
+        The tracker changes only when an instant is associated, and that estimates its sets: the
+        sets as of that instant again (a step that leaves the next instant open) are the same, less
+        the tracks pruned since."""
+        if self._sets is not None and self._sets[0] == t:
+            return {tid: views for tid, views in self._sets[1].items() if self.tracker.track(tid) is not None}
         sets = self.tracker.view_sets(t, self.config.freshness_s)
+        self._sets = t, sets
         stamps_of: dict[int, list[int]] = {}
         for tid, views in sets.items():
             track = self.tracker.track(tid)

@@ -291,7 +291,7 @@ class Timeline:
         floor = now - self._max_delay_ns
         if self._start_ns is None:
             self._start_ns = now
-        waiting = [c.heard_ns for c in self.cameras.values() if c.heard_ns is not None and c.heard_ns >= floor]
+        waiting = list(self._heard_within(now).values())
         if now - self._start_ns < self._max_delay_ns and any(c.heard_ns is None for c in self.cameras.values()):
             waiting.append(floor)  # just started, and a camera has not spoken yet: it may be a slow one
         mark = min(min(waiting) if waiting else floor, now)
@@ -302,8 +302,12 @@ class Timeline:
 
     def delivering(self, now_ns: int) -> set[str]:
         """The cameras the watermark waits for at ``now_ns``: those that delivered within ``max_delay_s``."""
+        return set(self._heard_within(now_ns))
+
+    def _heard_within(self, now_ns: int) -> dict[str, int]:
+        """The newest stamp of each camera that delivered within ``max_delay_s`` of ``now_ns``."""
         floor = int(now_ns) - self._max_delay_ns
-        return {cid for cid, c in self.cameras.items() if c.heard_ns is not None and c.heard_ns >= floor}
+        return {cid: c.heard_ns for cid, c in self.cameras.items() if c.heard_ns is not None and c.heard_ns >= floor}
 
     def release(self, limit: int) -> list[Observation]:
         """The admitted frames captured up to the watermark, in capture order (at most ``limit``)."""
