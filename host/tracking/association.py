@@ -40,7 +40,7 @@ class Match:
         track_id: the track it went to, or None when it was ignored.
         status: "matched" to an existing track, "created" a new candidate, or "ignored":
             fewer than ``min_joints`` joints; or unmatched and unfit to start a candidate
-            (fewer than ``min_joints_new`` joints, no ground point surer than ``gate_m``,
+            (with geometry, no ground point surer than ``gate_m``,
             standing where an unseen track stands, or with neither a colour nor a ground
             point); ``Tracker.stats`` counts each reason.
         colour_distance: median Bhattacharyya distance to the track's history (NaN if unknown

@@ -34,11 +34,6 @@ class TrackerConfig:
             ``gate_m + sigma`` of the track's predicted position.
         use_geometry: False turns the gate and the geometric cost off (the paper's tracker).
         min_joints: views with fewer visible joints are ignored.
-        min_joints_new: a view needs at least this many visible joints to start a candidate
-            (and, with ``use_geometry``, a ground point whose 1-sigma is under ``gate_m``);
-            poorer ones (a head and a hand at the image's edge) may only match existing
-            tracks: their colours come from a few pixels and their ground points from a box,
-            and a candidate started from them is usually a duplicate of someone.
         confirm_max_gap_s: a candidate unseen longer than this restarts its confirmation clock,
             so "2 s of matches" means 2 s of steady matches.
         accel_std_mps2: how fast a person's walking velocity may change, for the position
@@ -83,7 +78,6 @@ class TrackerConfig:
     gate_m: float = 1.0
     use_geometry: bool = True
     min_joints: int = 3
-    min_joints_new: int = 6
     confirm_max_gap_s: float = 1.0
     accel_std_mps2: float = 1.0
     max_tracks: int = 64
@@ -102,7 +96,6 @@ class TrackerConfig:
         if not isinstance(self.use_geometry, bool):
             raise ValueError(f"TrackerConfig.use_geometry must be true or false, got {self.use_geometry!r}")
         _check("min_joints", self.min_joints, 0, NUM_KEYPOINTS, integer=True)
-        _check("min_joints_new", self.min_joints_new, 0, NUM_KEYPOINTS, integer=True)
         _check("confirm_max_gap_s", self.confirm_max_gap_s, 0.0, 600.0, lo_open=True)
         _check("accel_std_mps2", self.accel_std_mps2, 0.0, 100.0, lo_open=True)
         _check("max_tracks", self.max_tracks, 1, MAX_PEOPLE, integer=True)

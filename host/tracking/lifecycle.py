@@ -8,7 +8,6 @@ light, or a partial view whose box puts them metres away; a candidate started fr
 duplicates that later split a person's views between two ids.
 
 - ``no_signature``: neither a colour nor (with geometry) a ground point: nothing to match it on again;
-- ``too_few_joints_new``: fewer than ``min_joints_new`` joints (a head and a hand at the image's edge);
 - ``unplaced_new``: (with geometry) no ground point surer than ``gate_m`` (1 sigma);
 - ``suppressed``: it stands inside the gate of a track this frame did not see: that person in
   another camera's light, not a newcomer (a newcomer beside someone is still started by any
@@ -51,14 +50,12 @@ class Newcomer(NamedTuple):
     has_colour: bool
     has_ground: bool
     ground_std_m: float  # NaN: no ground point
-    n_joints: int
     near_unseen: bool  # inside the gate of a track this frame did not see
 
 
 # (counter, veto): the first veto that holds is counted and the view starts nobody.
 BIRTH_VETOES: tuple[tuple[str, Callable[[Newcomer, TrackerConfig], bool]], ...] = (
     ("no_signature", lambda v, c: not (v.has_colour or (v.has_ground and c.use_geometry))),
-    ("too_few_joints_new", lambda v, c: v.n_joints < c.min_joints_new),
     ("unplaced_new", lambda v, c: c.use_geometry and not v.ground_std_m < c.gate_m),
     ("suppressed", lambda v, c: v.near_unseen),
 )

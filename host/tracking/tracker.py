@@ -49,7 +49,7 @@ from superbody.host.tracking.track import StampedView, Track
 __all__ = ["Tracker"]
 
 _STATS = (
-    "observations", "views", "wrong_site", "unknown_camera", "too_few_joints", "track_cap", "evicted_candidates", "too_few_joints_new",
+    "observations", "views", "wrong_site", "unknown_camera", "too_few_joints", "track_cap", "evicted_candidates",
     "no_ground_point", "no_signature", "unplaced_new", "suppressed", "duplicate_views", "matched", "new_candidates", "confirmed", "removed",
     "dropped_candidates", "reidentified", "merged", "views_of_another_body", "feedback_refused",
 )
@@ -151,7 +151,7 @@ class Tracker:
             rest = np.setdiff1d(rest, rest[rows])
         for r in rest:
             i = int(views.idx[r])
-            newcomer = Newcomer(bool(views.has_colour[r]), bool(views.has_ground[r]), float(views.sigma[r]), int(views.n_joints[i]),
+            newcomer = Newcomer(bool(views.has_colour[r]), bool(views.has_ground[r]), float(views.sigma[r]),
                                 bool((near[r] & unseen).any()))
             tr = self._life.birth(newcomer, t)
             if tr is not None:

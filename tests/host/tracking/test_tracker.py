@@ -181,8 +181,8 @@ def test_foreign_observations_are_counted_and_dropped(obs, counter):
     ("keep", "status", "counter"),
     [
         (2, "ignored", "too_few_joints"),       # nose and one eye: fewer than min_joints = 3
-        (3, "ignored", "too_few_joints_new"),   # enough to match someone, too few to start someone
-        (6, "created", None),                   # min_joints_new = 6: a new candidate
+        (3, "ignored", "unplaced_new"),         # nose and eyes: enough to match someone, but nowhere on the floor
+        (6, "created", None),                   # and the left shoulder: placed, a new candidate
         (17, "created", None),                  # everything
     ],
 )
@@ -191,7 +191,7 @@ def test_views_with_too_few_joints_are_ignored(keep, status, counter):
     v = person_view(C1, 0.0, 0.0, 0.0, colour(20.0), keep=keep)
     (m,) = tr.update(Observation(SITE.name, "c1", 0, T0, 640, 480, (v,)))
     assert m.status == status
-    for name in ("too_few_joints", "too_few_joints_new"):
+    for name in ("too_few_joints", "unplaced_new"):
         assert tr.stats[name] == (name == counter)
 
 
@@ -244,7 +244,7 @@ def test_a_view_that_cannot_be_placed_on_the_floor_starts_nobody(use_geometry):
     for k in range(5):
         tr.update(one_person(T0 + k * S // 10, seed=k))
     v = _unplaced(person_view(C2, 0.0, 0.0, 0.0, colour(110.0)))
-    assert v.num_visible >= TrackerConfig().min_joints_new
+    assert v.num_visible >= 6  # more joints than the head: placed, it would start someone
     (m,) = tr.update(Observation(SITE.name, "c2", 0, T0 + S // 2, 640, 480, (v,)))
     assert tr.stats["no_ground_point"] == 1
     # With geometry a newcomer must be placed; the paper's tracker has no floor to place them on.
