@@ -382,11 +382,10 @@ def _step(filters: Sequence[PoseFilter], t_ns: NDArray, pose: NDArray, std: NDAr
     # nothing measures a turn, and a rate the prior set (a position that stepped 0.15 m, a person
     # whose side left every view, is a walk of 0.5 m/s to the filter for a few frames) would turn
     # a person standing still for as long as nothing is measured (10 deg/s: test_aggregator.py).
+    # (rate and cov are this step's own arrays: cv_update and _walking_prior return new ones.)
     still = np.isinf(std[:, 2]) & ~walking
-    if still.any():
-        rate, cov = rate.copy(), AxisCov(*(f.copy() for f in cov))
-        rate[still, 2] = 0.0
-        cov.p01[still, 2] = cov.p10[still, 2] = 0.0
+    rate[still, 2] = 0.0
+    cov.p01[still, 2] = cov.p10[still, 2] = 0.0
     pos[:, 2] = wrap_angle(pos[:, 2])
     # Without yaw measurements the yaw's variance would grow without end (past the PoseArray's
     # limit within two minutes); an angle's is pi^2 at most: the yaw axis's block is scaled down.
