@@ -16,7 +16,6 @@ from superbody.edge.colour import bhattacharyya_matrix
 from superbody.host.tracking.config import TrackerConfig
 from superbody.host.tracking.evidence import sigmas_from
 from superbody.host.tracking.motion import predict_tracks
-from superbody.host.tracking.reid import REID_MARGIN
 from superbody.host.tracking.track import BINS, Track
 
 if TYPE_CHECKING:
@@ -214,7 +213,7 @@ def associate(t: int, tracks: list[Track], views: FrameViews, cfg: TrackerConfig
                 body = near & (sig <= cfg.same_body_sigmas)
             feasible &= ~geo_known | body
             cost += np.where(geo_known, 0.5 * sig**2 + spread, _UNKNOWN_PLACE_COST)
-        vouched = clearly_best(colour_d, REID_MARGIN) | (geo_known & (sigma < cfg.gate_m)[:, None])
+        vouched = clearly_best(colour_d, cfg.colour_margin) | (geo_known & (sigma < cfg.gate_m)[:, None])
     cost -= np.log(np.array([tr.support for tr in tracks]))[None, :]
     rows, cols = assign(cost, feasible & vouched)
     return rows, cols, colour_d, geo_d, near, body

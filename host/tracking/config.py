@@ -69,6 +69,25 @@ class TrackerConfig:
             comes from pixels: what is left is the calibration's and the detector's error.
             0.08: dev.json's real sets (3 cameras) then have a view beyond 3 sigmas in 0.3% of
             them; at 0.05, in 3.3%, and the live figures get worse.
+        edge_margin: a camera clearly sees where a candidate stands (a frame of it is a chance
+            to see them: ``confirm_min_support``) only if the torso's centre projects inside its
+            image less this share of the image's width and height on each side
+            (``evidence.clearly_sees``: a detector misses people cut in half at the edges; 0: the
+            whole image). 0.1: at 0, k seed 40 (12 s) loses a person for 3 s (recall 0.989 ->
+            0.949) and k meets the bar at 28 of 30 seeds.
+        merge_after_s: two confirmed tracks that stand inside each other (or whose views each
+            fit the other's position) this long are one person, the younger is removed
+            (``host.tracking.merge``). 0.5: at 0 (at once), seed 21 of k and l gets a switch and
+            an extra track and each crowd (d, e, h, j, 45 s) a switch.
+        colour_margin: colours point clearly to one track (a cue that vouches for a match) or
+            one lost person (re-identification) only if every other is at least this much
+            further in Bhattacharyya distance (``association.clearly_best``, ``host.tracking.reid``;
+            0: the nearest is enough, even by a hair).
+        duplicate_spread: two skeletons of one frame whose shared joints lie, on average, within
+            this share of the taller one's height of each other are one detection
+            (``measure.duplicate_views``; 0: only exact copies). 0.1: people standing side by
+            side are a body width apart (about a quarter of their height), a detector's double
+            report or a replayed copy a few pixels.
     """
 
     confirm_after_s: float = 2.0
@@ -86,6 +105,10 @@ class TrackerConfig:
     min_separation_m: float = 0.3
     same_body_sigmas: float = 3.0
     same_body_across_m: float = 0.08
+    edge_margin: float = 0.1
+    merge_after_s: float = 0.5
+    colour_margin: float = 0.1
+    duplicate_spread: float = 0.1
 
     def __post_init__(self) -> None:
         _check("confirm_after_s", self.confirm_after_s, 0.0, 600.0)
@@ -104,3 +127,7 @@ class TrackerConfig:
         _check("min_separation_m", self.min_separation_m, 0.0, 2.0)
         _check("same_body_sigmas", self.same_body_sigmas, 0.0, 100.0)
         _check("same_body_across_m", self.same_body_across_m, 0.0, 10.0, lo_open=True)
+        _check("edge_margin", self.edge_margin, 0.0, 0.45)
+        _check("merge_after_s", self.merge_after_s, 0.0, 600.0)
+        _check("colour_margin", self.colour_margin, 0.0, 1.0)
+        _check("duplicate_spread", self.duplicate_spread, 0.0, 1.0)

@@ -6,7 +6,7 @@ keep landing inside a candidate's gate. Two physical facts tell them from people
 
 - **A person is seen by every camera that clearly sees where they stand** (negative evidence).
   Each frame of a camera that clearly sees a candidate's position (``clearly_sees``: the torso
-  centre, 1.17 m up, inside the image less ``EDGE_MARGIN`` of its size on each side, in front
+  centre, 1.17 m up, inside the image less ``TrackerConfig.edge_margin`` of its size on each side, in front
   of the camera, within the detector's range, no obstacle of the site in between) is a chance
   to see it; a candidate is
   confirmed only if at least ``TrackerConfig.confirm_min_support`` of its chances since its
@@ -24,7 +24,7 @@ keep landing inside a candidate's gate. Two physical facts tell them from people
   ``TrackerConfig.min_separation_m`` of a confirmed person's is that person seen again (a
   detector's second, partial skeleton of them, another camera's odd colours), not a newcomer:
   it is not confirmed. Two confirmed tracks that stay that close (or whose views each fit the
-  other's position) for ``merge.MERGE_AFTER_S``, and that no camera saw in one frame
+  other's position) for ``TrackerConfig.merge_after_s``, and that no camera saw in one frame
   (``merge.seen_together``: two detections in one frame are two bodies), are one person whose
   views went to two tracks: the younger is removed (``host.tracking.merge``). Torsos are about
   0.25 m deep and 0.4 m wide, so centres closer than 0.3 m are one body; people standing shoulder to shoulder, or
@@ -62,22 +62,22 @@ from superbody.host.tracking.config import TrackerConfig
 from superbody.host.tracking.motion import fuse_positions, predict_tracks
 from superbody.host.tracking.track import StampedView, Track
 
-__all__ = ["EDGE_MARGIN", "TORSO_CENTRE_M", "clearly_sees", "corroborated", "too_close", "feed_back", "off_track", "one_body", "set_s_of_one_body", "sigmas_from", "squared_sigmas", "view_covariance"]
+__all__ = ["TORSO_CENTRE_M", "clearly_sees", "corroborated", "too_close", "feed_back", "off_track", "one_body", "set_s_of_one_body", "sigmas_from", "squared_sigmas", "view_covariance"]
 
 # Height of a standing adult's torso centre: midway between the hips and the shoulders (edge.body).
 TORSO_CENTRE_M = 0.5 * (TYPICAL_HEIGHT_M[LEFT_HIP] + TYPICAL_HEIGHT_M[LEFT_SHOULDER])
-EDGE_MARGIN = 0.1  # fraction of the image's width and height left out on each side
 
 
-def clearly_sees(cam: Camera, xy: NDArray, obstacles: Sequence[Obstacle] = ()) -> NDArray[np.bool_]:
+def clearly_sees(cam: Camera, xy: NDArray, margin: float, obstacles: Sequence[Obstacle] = ()) -> NDArray[np.bool_]:
     """(N,) whether the camera clearly sees a person standing at each floor point (N, 2).
 
-    Clearly: their torso centre projects inside the image less ``EDGE_MARGIN`` on each side,
+    Clearly: their torso centre projects inside the image less ``margin`` (a share of its width
+    and height: ``TrackerConfig.edge_margin``) on each side,
     in front of the camera, within ``edge.floor.detectable_range_m``, and no obstacle of the
     site (a shelf, a pillar) stands between the camera and it (``edge.floor.visible``). Other
     people are not modelled.
     """
-    return visible(cam, xy, (TORSO_CENTRE_M,), EDGE_MARGIN, obstacles=obstacles)
+    return visible(cam, xy, (TORSO_CENTRE_M,), margin, obstacles=obstacles)
 
 
 def corroborated(tr: Track, min_support: float) -> bool:

@@ -25,7 +25,7 @@ or a person unseen for over ``confirm_max_gap_s`` whose views it took (that trac
 one id; ``host.tracking.reid``).
 
 **Death** (``prune``): ``merged`` (the younger of two confirmed tracks that stood inside each other,
-or whose views each fit the other's position, for ``merge.MERGE_AFTER_S``: ``host.tracking.merge``), ``removed`` (a person unseen for ``remove_after_s``, remembered
+or whose views each fit the other's position, for ``merge_after_s``: ``host.tracking.merge``), ``removed`` (a person unseen for ``remove_after_s``, remembered
 for re-identification) and ``dropped_candidates`` (a candidate unseen as long).
 """
 
@@ -132,7 +132,7 @@ class Lifecycle:
         """Remove the merged and the unseen (module docstring); return them."""
         cfg = self.config
         people = [tr for tr in self.tracks.values() if tr.state == "confirmed"]
-        merged = coincident(people, now_ns, cfg.min_separation_m, cfg) if cfg.min_separation_m > 0 else []
+        merged = coincident(people, now_ns, cfg) if cfg.min_separation_m > 0 else []
         for tr in merged:
             del self.tracks[tr.id]
         self.stats["merged"] += len(merged)

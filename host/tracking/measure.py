@@ -22,13 +22,8 @@ from superbody.host.tracking.config import TrackerConfig
 from superbody.host.tracking.ground import ground_points
 from superbody.host.tracking.track import BINS
 
-__all__ = ["FrameViews", "measure", "duplicate_views", "DUPLICATE_SPREAD"]
+__all__ = ["FrameViews", "measure", "duplicate_views"]
 
-# Two skeletons of one frame whose shared joints lie on average within this fraction of the
-# skeleton's height of each other are one detection: people standing side by side are a body
-# width apart (about a quarter of their height), a detector's double report or a replayed copy
-# a few pixels.
-DUPLICATE_SPREAD = 0.1
 # Fewer shared joints than this cannot tell a copy from a neighbour.
 _MIN_SHARED_JOINTS = 5
 # A skeleton's height in pixels is at least this (a few joints close together say little).
@@ -60,7 +55,7 @@ def measure(obs: Observation, camera: Camera, cfg: TrackerConfig, stats: dict[st
     enough = n_joints >= cfg.min_joints
     stats["too_few_joints"] += int(n - enough.sum())
     idx = np.flatnonzero(enough)  # (K,) the views we use
-    copies = duplicate_views(kps[idx, :, :2], n_joints[idx])  # one person reported twice, or a flood of copies
+    copies = duplicate_views(kps[idx, :, :2], n_joints[idx], cfg.duplicate_spread)  # one person reported twice, or a flood of copies
     stats["duplicate_views"] += int(copies.sum())
     idx = idx[~copies]
     if not len(idx):
@@ -74,11 +69,11 @@ def measure(obs: Observation, camera: Camera, cfg: TrackerConfig, stats: dict[st
     return FrameViews(idx, n_joints, ground, sigma, has_ground, hists, hists.sum(axis=1) > 0, amplitudes(hists), camera.t[:2].copy())
 
 
-def duplicate_views(keypoints: NDArray, n_joints: NDArray) -> NDArray[np.bool_]:
+def duplicate_views(keypoints: NDArray, n_joints: NDArray, spread: float) -> NDArray[np.bool_]:
     """Which of one frame's K skeletons repeat another: the same person reported more than once.
 
     Two skeletons are close when they share at least ``_MIN_SHARED_JOINTS`` detected joints and
-    those joints lie, on average, within ``DUPLICATE_SPREAD`` of the taller one's height (the
+    those joints lie, on average, within ``spread`` (``TrackerConfig.duplicate_spread``) of the taller one's height (the
     vertical extent of its joints) of each other. Closeness links skeletons into groups
     (transitively: a chain of copies a few pixels apart is one group however long it is); each
     group keeps the skeleton with the most detected joints (ties: the first in the frame).
@@ -87,6 +82,7 @@ def duplicate_views(keypoints: NDArray, n_joints: NDArray) -> NDArray[np.bool_]:
     Args:
         keypoints: (K, 17, 2) pixel coordinates, NaN for joints not detected.
         n_joints: (K,) detected joints of each.
+        spread: how close, as a share of the taller skeleton's height.
 
     Returns:
         (K,) True for the copies.
@@ -102,7 +98,7 @@ def duplicate_views(keypoints: NDArray, n_joints: NDArray) -> NDArray[np.bool_]:
     d = np.linalg.norm(np.where(shared[..., None], keypoints[:, None] - keypoints[None, :], 0.0), axis=3)  # (K, K, 17)
     n_shared = shared.sum(axis=2)  # (K, K)
     mean_d = d.sum(axis=2) / np.maximum(n_shared, 1)  # (K, K)
-    close = (n_shared >= _MIN_SHARED_JOINTS) & (mean_d <= DUPLICATE_SPREAD * np.maximum(height[:, None], height[None, :]))
+    close = (n_shared >= _MIN_SHARED_JOINTS) & (mean_d <= spread * np.maximum(height[:, None], height[None, :]))
     _, group = connected_components(close, directed=False)  # (K,) group of each skeleton
     best: dict[int, int] = {}
     for i in np.argsort(-np.asarray(n_joints), kind="stable").tolist():

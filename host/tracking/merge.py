@@ -15,14 +15,12 @@ from superbody.host.tracking.evidence import sigmas_from
 from superbody.host.tracking.motion import NS_PER_S, predict_tracks
 from superbody.host.tracking.track import Track
 
-__all__ = ["MERGE_AFTER_S", "coincident", "seen_together"]
-
-MERGE_AFTER_S = 0.5  # how long two confirmed tracks may stand inside each other before they are one
+__all__ = ["coincident", "seen_together"]
 
 
-def coincident(people: Sequence[Track], now_ns: int, min_separation_m: float, cfg: TrackerConfig | None = None) -> list[Track]:
-    """The confirmed tracks that stood within ``min_separation_m`` of an older one for ``MERGE_AFTER_S``,
-    or (given ``cfg``, with ``same_body_sigmas``) as close as one body: each track's latest views
+def coincident(people: Sequence[Track], now_ns: int, cfg: TrackerConfig) -> list[Track]:
+    """The confirmed tracks that stood within ``cfg.min_separation_m`` of an older one for
+    ``cfg.merge_after_s``, or (with ``same_body_sigmas``) as close as one body: each track's latest views
     all put their person within ``same_body_sigmas`` of the other's position (``sigmas_from``), as
     when two cameras' views of one person, a few decimetres apart along their lines of sight, each
     went to a track of their own (scene m: a person in the doorway, two tracks 0.32 m apart for 6 s).
@@ -33,8 +31,8 @@ def coincident(people: Sequence[Track], now_ns: int, min_separation_m: float, cf
     """
     placed = sorted((tr for tr in people if tr.motion is not None), key=lambda tr: (tr.confirmed_ns or 0, tr.id))
     xy = np.array([tr.position for tr in placed]).reshape(-1, 2)
-    close = np.linalg.norm(xy[:, None] - xy[None], axis=2) < min_separation_m  # (M, M)
-    if cfg is not None and cfg.same_body_sigmas > 0 and len(placed) > 1:
+    close = np.linalg.norm(xy[:, None] - xy[None], axis=2) < cfg.min_separation_m  # (M, M)
+    if cfg.same_body_sigmas > 0 and len(placed) > 1:
         explained = _explained(placed, now_ns, cfg)
         close |= explained & explained.T
     out: list[Track] = []
@@ -44,17 +42,17 @@ def coincident(people: Sequence[Track], now_ns: int, min_separation_m: float, cf
             tr.close_since_ns = None
             continue
         tr.close_since_ns = now_ns if tr.close_since_ns is None else tr.close_since_ns
-        if now_ns - tr.close_since_ns >= MERGE_AFTER_S * NS_PER_S:
+        if now_ns - tr.close_since_ns >= cfg.merge_after_s * NS_PER_S:
             out.append(tr)
     return out
 
 
 def _explained(tracks: Sequence[Track], now_ns: int, cfg: TrackerConfig) -> NDArray[np.bool_]:
-    """(M, M): whether each track's latest views (those of its last ``MERGE_AFTER_S``) all put
+    """(M, M): whether each track's latest views (those of its last ``merge_after_s``) all put
     their person within ``same_body_sigmas`` of each track's position at ``now_ns`` (``sigmas_from``)."""
     pos, cov = predict_tracks(list(tracks), now_ns, cfg.accel_std_mps2)  # all at one time
     views = [(i, sv) for i, tr in enumerate(tracks) for sv in tr.views.values()
-             if tr.last_seen_ns - sv.stamp_ns <= MERGE_AFTER_S * NS_PER_S and np.isfinite(sv.ground_std_m)]
+             if tr.last_seen_ns - sv.stamp_ns <= cfg.merge_after_s * NS_PER_S and np.isfinite(sv.ground_std_m)]
     out = np.zeros((len(tracks), len(tracks)), dtype=bool)
     if not views:
         return out

@@ -6,7 +6,7 @@ a candidate that took a person's views is confirmed 2 s after it began, which ma
 person it took them from is removed, 2 s after their last view). A new person takes a lost
 person's id back when their colours match that one lost person clearly (median Bhattacharyya
 distance between the two histories below ``d_max``, the test a view passes to match a track; the
-next lost person and every person present at least ``REID_MARGIN`` further). See
+next lost person and every person present at least ``TrackerConfig.colour_margin`` further). See
 ``host.tracking.tracker``'s module docstring.
 
 Where the new person stands is not asked. A test that the lost person could have walked there
@@ -27,10 +27,7 @@ from numpy.typing import NDArray
 from superbody.host.tracking.config import TrackerConfig
 from superbody.host.tracking.track import Track
 
-__all__ = ["Lost", "REID_MARGIN", "remember", "remembered_as"]
-
-# Re-identification needs the best remembered person this much closer in colour than the next.
-REID_MARGIN = 0.1
+__all__ = ["Lost", "remember", "remembered_as"]
 
 
 class Lost(NamedTuple):
@@ -65,7 +62,7 @@ def remembered_as(tr: Track, lost: Iterable[Lost], present: Iterable[Track], cfg
         d = np.sqrt(np.clip(1.0 - mine @ person.amp.T, 0.0, 1.0))  # (n, n_lost)
         scored.append((float(np.median(d)), person))
     scored.sort(key=lambda s: s[0])
-    if not scored or scored[0][0] >= cfg.d_max or (len(scored) > 1 and scored[1][0] - scored[0][0] < REID_MARGIN):
+    if not scored or scored[0][0] >= cfg.d_max or (len(scored) > 1 and scored[1][0] - scored[0][0] < cfg.colour_margin):
         return None
     # Lighting differs between cameras, so the scale of "same colours" does too: the people
     # present now are certainly not the lost one, and must all look clearly less like it.
@@ -74,6 +71,6 @@ def remembered_as(tr: Track, lost: Iterable[Lost], present: Iterable[Track], cfg
         if not len(theirs):
             continue
         d = np.sqrt(np.clip(1.0 - mine @ theirs.T, 0.0, 1.0))
-        if float(np.median(d)) - scored[0][0] < REID_MARGIN:
+        if float(np.median(d)) - scored[0][0] < cfg.colour_margin:
             return None
     return scored[0][1]

@@ -165,7 +165,7 @@ class Tracker:
         idx = [j for j, tr in enumerate(tracks) if tr.state == "candidate" and tr.motion is not None]
         if not idx:
             return
-        seen = clearly_sees(self._cameras[camera], np.array([tracks[j].position for j in idx]), self.site.obstacles)
+        seen = clearly_sees(self._cameras[camera], np.array([tracks[j].position for j in idx]), self.config.edge_margin, self.site.obstacles)
         if glimpsed is not None:
             seen &= ~glimpsed[idx]
         matched = set(cols.tolist())

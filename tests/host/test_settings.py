@@ -42,6 +42,7 @@ def test_the_site_file_sets_the_host_tracker_and_filter_and_flags_win():
         ({"max_delay": 1.0}, r"lab.toml: \[host\]: unknown field\(s\) max_delay; allowed: .*max_delay_s"),       # a misspelt field
         ({"tracker": {"gate": 1}}, r"\[host.tracker\]: unknown field\(s\) gate; allowed: .*gate_m"),
         ({"tracker": {"gate_m": -1.0}}, r"\[host.tracker\]: TrackerConfig.gate_m must be a number in \(0.0, 100.0\], got -1.0"),
+        ({"tracker": {"edge_margin": 0.5}}, r"\[host.tracker\]: TrackerConfig.edge_margin must be a number in \[0.0, 0.45\], got 0.5"),
         ({"max_delay_s": 5.0}, r"\[host\]: HostConfig.max_delay_s .* must be shorter than tracker.remove_after_s"),  # out of its range
         ({"filter": "fast"}, r"\[host.filter\] must be a table"),
     ],

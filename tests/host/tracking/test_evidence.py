@@ -10,11 +10,14 @@ from superbody.edge.body import NUM_KEYPOINTS
 from superbody.edge.messages.observation import Observation
 from superbody.edge.site import Site
 from superbody.host.tracking.config import TrackerConfig
-from superbody.host.tracking.evidence import EDGE_MARGIN, clearly_sees, too_close
-from superbody.host.tracking.merge import MERGE_AFTER_S, coincident
+from superbody.host.tracking.evidence import clearly_sees, too_close
+from superbody.host.tracking.merge import coincident
 from superbody.host.tracking.track import Track
 from superbody.host.tracking.tracker import Tracker
 from tests.host.tracking.test_tracker import C1, C2, C3, CAMS, SITE, T0, S, frame, make_camera, schedule
+
+MARGIN = TrackerConfig().edge_margin
+DISTANCE = TrackerConfig(same_body_sigmas=0.0)  # merging by distance alone (min_separation_m)
 
 
 def test_a_camera_clearly_sees_its_middle_not_its_edges_nor_behind_it():
@@ -24,9 +27,10 @@ def test_a_camera_clearly_sees_its_middle_not_its_edges_nor_behind_it():
     pts = np.array([[0.0, 0.0], [6.0, 6.0], 4.75 * side, 3.0 * side, 5.5 * side])
     # the middle of its view; behind it; off to the side: torso centre at u = 29 px (inside the
     # image, within its edge margin of 64 px), at u = 136 px (clearly), beyond the image (u < 0)
-    assert clearly_sees(cam, pts).tolist() == [True, False, False, True, False]
-    assert clearly_sees(cam, np.zeros((0, 2))).shape == (0,)
-    assert 0 < EDGE_MARGIN < 0.5
+    assert clearly_sees(cam, pts, MARGIN).tolist() == [True, False, False, True, False]
+    assert clearly_sees(cam, np.zeros((0, 2)), MARGIN).shape == (0,)
+    # no margin: the whole image, so the point at u = 29 px is clearly seen too
+    assert clearly_sees(cam, pts, 0.0).tolist() == [True, False, True, True, False]
 
 
 def test_an_obstacle_between_camera_and_person_hides_them():
@@ -34,10 +38,10 @@ def test_an_obstacle_between_camera_and_person_hides_them():
 
     shelf = Obstacle("shelf", (2.0, 2.0, 0.0), (2.6, 2.6, 2.0))  # on the line from c1 (4.5, 4.5) to the origin
     pts = np.array([[0.0, 0.0], [1.0, -1.0]])
-    assert clearly_sees(C1, pts).tolist() == [True, True]
-    assert clearly_sees(C1, pts, (shelf,)).tolist() == [False, True]
+    assert clearly_sees(C1, pts, MARGIN).tolist() == [True, True]
+    assert clearly_sees(C1, pts, MARGIN, (shelf,)).tolist() == [False, True]
     low = Obstacle("table", (2.0, 2.0, 0.0), (2.6, 2.6, 0.5))  # below the line of sight to the torso
-    assert clearly_sees(C1, pts, (low,)).tolist() == [True, True]
+    assert clearly_sees(C1, pts, MARGIN, (low,)).tolist() == [True, True]
 
 
 def test_too_close():
@@ -53,9 +57,9 @@ def test_two_tracks_one_camera_frame_matched_both_are_two_people_however_close()
     old, young = _placed(1, (0.0, 0.0), 1 * S), _placed(2, (0.2, 0.0), 2 * S)
     view = object()  # the views themselves do not matter here, only which frame they came from
     old.views["c1"], young.views["c1"] = StampedView(5 * S, view), StampedView(5 * S, view)  # type: ignore[arg-type]
-    assert coincident([old, young], 10 * S, 0.3) == [] and coincident([old, young], 11 * S, 0.3) == []
+    assert coincident([old, young], 10 * S, DISTANCE) == [] and coincident([old, young], 11 * S, DISTANCE) == []
     young.views["c1"] = StampedView(5 * S + 66_000_000, view)  # another frame: nothing says two bodies
-    assert coincident([old, young], 12 * S, 0.3) == [] and coincident([old, young], 13 * S, 0.3) == [young]
+    assert coincident([old, young], 12 * S, DISTANCE) == [] and coincident([old, young], 13 * S, DISTANCE) == [young]
 
 
 def _placed(tid: int, xy: tuple[float, float], confirmed_ns: int) -> Track:
@@ -67,11 +71,14 @@ def _placed(tid: int, xy: tuple[float, float], confirmed_ns: int) -> Track:
 def test_the_younger_of_two_coincident_tracks_goes_after_a_while_and_only_then():
     old, young, apart = _placed(7, (0.0, 0.0), 1 * S), _placed(3, (0.1, 0.0), 2 * S), _placed(9, (1.0, 0.0), 3 * S)
     people = [young, apart, old]  # any order: age is the confirmation time
-    assert coincident(people, 10 * S, 0.3) == []  # close from now on
-    assert coincident(people, 10 * S + int(MERGE_AFTER_S * S) - 1, 0.3) == []
-    assert coincident(people, 10 * S + int(MERGE_AFTER_S * S), 0.3) == [young]
+    assert coincident(people, 10 * S, DISTANCE) == []  # close from now on
+    assert coincident(people, 10 * S + int(DISTANCE.merge_after_s * S) - 1, DISTANCE) == []
+    assert coincident(people, 10 * S + int(DISTANCE.merge_after_s * S), DISTANCE) == [young]
     young.set_motion(np.array([(0.5, 0.0), (0.0, 0.0)]), np.eye(4), 20 * S)  # walked apart: the clock restarts
-    assert coincident(people, 20 * S, 0.3) == [] and young.close_since_ns is None
+    assert coincident(people, 20 * S, DISTANCE) == [] and young.close_since_ns is None
+    # merge_after_s 0: one the moment they stand inside each other
+    old, young = _placed(7, (0.0, 0.0), 1 * S), _placed(3, (0.1, 0.0), 2 * S)
+    assert coincident([old, young], 10 * S, TrackerConfig(same_body_sigmas=0.0, merge_after_s=0.0)) == [young]
 
 
 @pytest.mark.parametrize("offset, merged", [((0.45, 0.0), True), ((0.0, 0.45), False)])
@@ -85,14 +92,14 @@ def test_two_tracks_whose_views_each_explain_the_other_are_one_person(offset, me
     old, young = _placed(1, (0.0, 0.0), 1 * S), _placed(2, offset, 2 * S)
     view = object()  # the views' joints do not matter here, only their ground points
     cfg, got = TrackerConfig(), []
-    for now in (10 * S, 10 * S + int(MERGE_AFTER_S * S)):  # seen again just now, each by its camera
+    for now in (10 * S, 10 * S + int(DISTANCE.merge_after_s * S)):  # seen again just now, each by its camera
         for tr, cam, xy in ((old, "c1", (0.0, 0.0)), (young, "c2", offset)):
             tr.set_motion(np.array([xy, [0.0, 0.0]]), 0.05**2 * np.eye(4), now - 10_000_000)
             tr.views[cam] = StampedView(now - 10_000_000, view, xy, 0.3, (4.0, 0.0) if cam == "c1" else (-4.0, 0.0))  # type: ignore[arg-type]
             tr.last_seen_ns = now - 10_000_000
-        got.append(coincident([old, young], now, 0.3, cfg))
+        got.append(coincident([old, young], now, cfg))
     assert got == [[], [young] if merged else []]  # as close as one body from the first, or never
-    assert coincident([old, young], 11 * S, 0.3) == []  # the distance alone: two people
+    assert coincident([old, young], 11 * S, DISTANCE) == []  # the distance alone: two people
 
 
 # --- through the tracker ------------------------------------------------------------------------
