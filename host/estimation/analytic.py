@@ -49,7 +49,7 @@ from superbody.edge.camera import Camera, intersect_plane, pixel_to_ray
 from superbody.edge.messages.observation import PersonView
 from superbody.edge.site import Site
 from superbody.host.estimation.estimator import Estimates
-from superbody.host.tracking.ground import LEVELS, MAX_RANGE_M, ground_point, ground_points, torso_range
+from superbody.host.tracking.ground import JOINT_PIXEL_STD, MAX_RANGE_M, ground_point, ground_points, torso_range
 
 __all__ = ["AnalyticEstimator", "GeometrySigmas", "triangulate", "joints_3d", "pair_points", "YAW_STD_NO_CUE", "NO_CUE", "HEAD", "PAIR",
            "HEIGHT_STD_M", "MAX_PLACEMENT_STD_M"]
@@ -79,7 +79,6 @@ _COS, _SIN = np.cos(_ANGLES), np.sin(_ANGLES)
 _PAIRS = ((body.LEFT_SHOULDER, body.RIGHT_SHOULDER), (body.LEFT_HIP, body.RIGHT_HIP))
 _HEAD = (1, 2, 3, 4)  # eyes and ears
 _SHOULDERS, _HIPS = _PAIRS
-_PIXEL_STD = {pair: next(lv.pixel_std for lv in LEVELS if set(lv.joints) == set(pair)) for pair in _PAIRS}  # the ground levels' detector noise
 
 
 def triangulate(origins: NDArray, directions: NDArray) -> NDArray[np.float64]:
@@ -201,7 +200,7 @@ def _fitted_facing(lines: Sequence[tuple[tuple[NDArray, NDArray], tuple[int, int
             cam, d, r, scale = frames[cams[0]]
             lr = lr * scale
             dh = max(abs(float(cam.t[2] - 0.5 * (left[2] + right[2]))), 1e-6)
-            dtheta = _PIXEL_STD[pair] / (0.5 * (cam.fx + cam.fy))
+            dtheta = JOINT_PIXEL_STD / (0.5 * (cam.fx + cam.fy))
             var_across = 2.0 * (dtheta * r) ** 2
             var_along = 2.0 * (dtheta * (r * r + dh * dh) / dh) ** 2
         else:  # triangulated: the pixels' sigma at its range, both ways (so any frame will do: its first camera's)
@@ -209,7 +208,7 @@ def _fitted_facing(lines: Sequence[tuple[tuple[NDArray, NDArray], tuple[int, int
             mid = 0.5 * (left[:2] + right[:2])
             r = max(float(np.mean([np.hypot(*(mid - site.camera(k).t[:2])) for k in cams])), 0.1)
             d = (mid - cam.t[:2]) / max(float(np.hypot(*(mid - cam.t[:2]))), 1e-6)
-            var_across = var_along = 2.0 * (_PIXEL_STD[pair] / (0.5 * (cam.fx + cam.fy)) * r) ** 2
+            var_across = var_along = 2.0 * (JOINT_PIXEL_STD / (0.5 * (cam.fx + cam.fy)) * r) ** 2
         p = np.array([-d[1], d[0]])  # across the line of sight, to the camera's left
         # The line at angle a in the first line's frame (across its line of sight, along it) is
         # at a - (this frame's bearing - the first's) in this one; there, with width w,

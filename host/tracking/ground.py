@@ -48,7 +48,7 @@ from superbody.edge.body import INDEX, LEFT_HIP, LEFT_SHOULDER, RIGHT_HIP, RIGHT
 from superbody.edge.camera import Camera, intersect_plane, pixel_to_ray
 from superbody.edge.messages.observation import PersonView
 
-__all__ = ["MAX_RANGE_M", "LEVELS", "Level", "ground_point", "ground_points", "torso_range"]
+__all__ = ["MAX_RANGE_M", "JOINT_PIXEL_STD", "LEVELS", "Level", "ground_point", "ground_points", "torso_range"]
 
 MAX_RANGE_M: Final[float] = 30.0
 
@@ -65,19 +65,21 @@ class Level(NamedTuple):
 
 
 _LEFT_ANKLE, _RIGHT_ANKLE = INDEX["left_ankle"], INDEX["right_ankle"]
+# The pose detector's noise on a joint's pixel, 1 sigma: one number for every joint.
+JOINT_PIXEL_STD: Final[float] = 4.0
 _TORSO_M: Final[float] = TYPICAL_HEIGHT_M[LEFT_SHOULDER] - TYPICAL_HEIGHT_M[LEFT_HIP]
 
 # The index into LEVELS is what ground_points reports as "level". The last is the torso's
 # length; the others are planes at a height.
 LEVELS: Final[tuple[Level, ...]] = (
-    Level("ankles", (_LEFT_ANKLE, _RIGHT_ANKLE), TYPICAL_HEIGHT_M[_LEFT_ANKLE], 0.05, 0.10, 4.0),
-    Level("hips", (LEFT_HIP, RIGHT_HIP), TYPICAL_HEIGHT_M[LEFT_HIP], 0.08, 0.10, 4.0),
-    Level("shoulders", (LEFT_SHOULDER, RIGHT_SHOULDER), TYPICAL_HEIGHT_M[LEFT_SHOULDER], 0.10, 0.12, 4.0),
+    Level("ankles", (_LEFT_ANKLE, _RIGHT_ANKLE), TYPICAL_HEIGHT_M[_LEFT_ANKLE], 0.05, 0.10, JOINT_PIXEL_STD),
+    Level("hips", (LEFT_HIP, RIGHT_HIP), TYPICAL_HEIGHT_M[LEFT_HIP], 0.08, 0.10, JOINT_PIXEL_STD),
+    Level("shoulders", (LEFT_SHOULDER, RIGHT_SHOULDER), TYPICAL_HEIGHT_M[LEFT_SHOULDER], 0.10, 0.12, JOINT_PIXEL_STD),
     # Used only when no ankle, hip or shoulder was seen, so the box's bottom edge is as likely
     # an occluder's edge (a table, a sofa) as the feet: a loose error model.
     Level("bbox", (), 0.0, 0.35, 0.50, 8.0),
     # Shoulder-to-hip length: ~8% between adults (stature alone varies ~4%) and with posture.
-    Level("torso", (LEFT_SHOULDER, RIGHT_SHOULDER, LEFT_HIP, RIGHT_HIP), _TORSO_M, 0.04, 0.10, 4.0),
+    Level("torso", (LEFT_SHOULDER, RIGHT_SHOULDER, LEFT_HIP, RIGHT_HIP), _TORSO_M, 0.04, 0.10, JOINT_PIXEL_STD),
 )
 _PLANES: Final[int] = 4  # LEVELS[:_PLANES] meet a plane; the torso is LEVELS[_PLANES]
 _HIPS, _SHOULDERS, _TORSO = 1, 2, 4
