@@ -26,8 +26,6 @@ __all__ = ["FrameViews", "measure", "duplicate_views"]
 
 # Fewer shared joints than this cannot tell a copy from a neighbour.
 _MIN_SHARED_JOINTS = 5
-# A skeleton's height in pixels is at least this (a few joints close together say little).
-_MIN_HEIGHT_PX = 20.0
 
 
 
@@ -92,8 +90,7 @@ def duplicate_views(keypoints: NDArray, n_joints: NDArray, spread: float) -> NDA
         return np.zeros(k, dtype=bool)
     vis = np.isfinite(keypoints).all(axis=2)  # (K, 17)
     v = np.where(vis, keypoints[:, :, 1], np.nan)
-    with np.errstate(invalid="ignore"):
-        height = np.maximum(np.nanmax(v, axis=1) - np.nanmin(v, axis=1), _MIN_HEIGHT_PX)  # (K,)
+    height = np.fmax.reduce(v, axis=1) - np.fmin.reduce(v, axis=1)  # (K,) NaN for a skeleton without joints
     shared = vis[:, None, :] & vis[None, :, :]  # (K, K, 17)
     d = np.linalg.norm(np.where(shared[..., None], keypoints[:, None] - keypoints[None, :], 0.0), axis=3)  # (K, K, 17)
     n_shared = shared.sum(axis=2)  # (K, K)
