@@ -24,7 +24,11 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["predict", "update", "white_accel_noise", "continuous_accel_noise", "AxisCov", "cv_predict", "cv_update"]
+__all__ = ["WALKING_SPEED_STD_MPS", "predict", "update", "white_accel_noise", "continuous_accel_noise", "AxisCov", "cv_predict", "cv_update"]
+
+# How fast a person first seen may be walking, 1-sigma, m/s (people walk at 1.2-1.4 m/s): the
+# speed both the tracks' position filters and the host's pose filter start from.
+WALKING_SPEED_STD_MPS = 1.0
 
 
 def _T(a: NDArray) -> NDArray:

@@ -40,7 +40,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from superbody.edge.angles import wrap_angle
-from superbody.host.filtering.kalman import AxisCov, cv_predict, cv_update
+from superbody.host.filtering.kalman import WALKING_SPEED_STD_MPS, AxisCov, cv_predict, cv_update
 
 __all__ = ["FilterConfig", "FilteredPose", "PoseFilter", "update_many", "predict_many"]
 
@@ -96,7 +96,7 @@ class FilterConfig:
     meas_std_yaw_rad: float = math.radians(4.0)
     accel_std_mps2: float = 3.0
     yaw_accel_std_radps2: float = 5.0
-    init_speed_std_mps: float = 1.0
+    init_speed_std_mps: float = WALKING_SPEED_STD_MPS
     init_yaw_rate_std_radps: float = 2.0
     reset_after_s: float = 2.0
     walk_yaw_std_rad: float = math.radians(25.0)

@@ -11,11 +11,12 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from superbody.host.filtering.kalman import WALKING_SPEED_STD_MPS
 from superbody.host.tracking.association import associate
 from superbody.host.tracking.config import TrackerConfig
 from superbody.host.tracking.evidence import view_covariance
 from superbody.host.tracking.measure import FrameViews
-from superbody.host.tracking.motion import INIT_SPEED_STD, NS_PER_S, posterior, predict_tracks
+from superbody.host.tracking.motion import NS_PER_S, posterior, predict_tracks
 from superbody.host.tracking.track import Track
 
 __all__ = ["associate_instant", "subset"]
@@ -49,7 +50,7 @@ def associate_instant(stamps: dict[int, int], views: dict[int, FrameViews], trac
     covs = {f: view_covariance(views[f].ground, views[f].sigma, views[f].camera_xy, cfg.same_body_across_m) for f in frames}
     # another frame's point, seen up to a frame period earlier or later: the walk since as extra noise
     t = np.array([stamps[f] for f in frames], dtype=np.float64) / NS_PER_S
-    walk = (INIT_SPEED_STD * (t[None, :] - t[:, None])) ** 2  # (F, F) variance added to frame h's point seen from frame g
+    walk = (WALKING_SPEED_STD_MPS * (t[None, :] - t[:, None])) ** 2  # (F, F) variance added to frame h's point seen from frame g
     for _ in range(_PASSES - 1):
         z, R = np.full((len(frames), m, 2), np.nan), np.full((len(frames), m, 2, 2), np.nan)  # each frame's point of each track
         for g, f in enumerate(frames):

@@ -16,17 +16,14 @@ from typing import TYPE_CHECKING, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from superbody.host.filtering.kalman import continuous_accel_noise, predict, update
+from superbody.host.filtering.kalman import WALKING_SPEED_STD_MPS, continuous_accel_noise, predict, update
 
 if TYPE_CHECKING:
     from superbody.host.tracking.track import Track
 
-__all__ = ["predict_positions", "predict_tracks", "update_positions", "fuse_positions", "posterior", "INIT_SPEED_STD"]
+__all__ = ["predict_positions", "predict_tracks", "update_positions", "fuse_positions", "posterior"]
 
 NS_PER_S = 1_000_000_000
-
-# Speed we assume for a track whose velocity is not yet known (1-sigma, m/s).
-INIT_SPEED_STD = 1.0
 
 _H = np.hstack([np.eye(2), np.zeros((2, 2))])  # a ground point measures the position
 
@@ -85,7 +82,7 @@ def fuse_positions(tracks: list[Track], xy: NDArray, R: NDArray, t_ns: int | NDA
     for j, tr in enumerate(tracks):
         if tr.motion is None:  # first point: the velocity is unknown
             P = np.zeros((4, 4))
-            P[:2, :2], P[2:, 2:] = R[j], INIT_SPEED_STD**2 * np.eye(2)
+            P[:2, :2], P[2:, 2:] = R[j], WALKING_SPEED_STD_MPS**2 * np.eye(2)
             tr.set_motion(np.vstack([xy[j], np.zeros(2)]), P, stamps[j])
         else:
             rows.append(j)
@@ -101,7 +98,7 @@ def fuse_positions(tracks: list[Track], xy: NDArray, R: NDArray, t_ns: int | NDA
     x, P = predict_positions(x, P, np.maximum(dt, 0.0), accel_std_mps2)
     # A point older than the state (another camera's frame came late) is applied at the state's
     # time, with the distance the person may have walked since as extra noise.
-    R = R + ((INIT_SPEED_STD * np.minimum(dt, 0.0)) ** 2)[:, None, None] * np.eye(2)  # (B, 2, 2)
+    R = R + ((WALKING_SPEED_STD_MPS * np.minimum(dt, 0.0)) ** 2)[:, None, None] * np.eye(2)  # (B, 2, 2)
     x, P = update_positions(x, P, xy, R)
     for j, (i, m) in enumerate(zip(rows, old, strict=True)):
         tracks[i].set_motion(x[j], P[j], max(m[2], t_old[j]))

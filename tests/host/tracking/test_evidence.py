@@ -468,7 +468,7 @@ def test_a_view_within_a_persons_range_error_goes_to_them_not_to_a_candidate_bor
     back under the candidate's id. A view now costs its negative log likelihood under each
     prediction: the person's sure prediction explains a view 0.1 m off along the camera's line of
     sight (its range error) better than the candidate's vague one explains a view on its spot."""
-    from superbody.host.tracking.motion import INIT_SPEED_STD
+    from superbody.host.filtering.kalman import WALKING_SPEED_STD_MPS
 
     tracker = Tracker(SITE)
     p, t = _person_at_origin_confirmed(tracker)
@@ -478,7 +478,7 @@ def test_a_view_within_a_persons_range_error_goes_to_them_not_to_a_candidate_bor
     sight = -np.asarray(C1.t[:2]) / np.linalg.norm(C1.t[:2])  # C1's line of sight through p
     spot = 0.1 * sight
     # ... as one point makes it: the view's sigma, the speed unknown.
-    cand.set_motion(np.array([spot, [0.0, 0.0]]), np.diag([0.15**2, 0.15**2, INIT_SPEED_STD**2, INIT_SPEED_STD**2]), t)
+    cand.set_motion(np.array([spot, [0.0, 0.0]]), np.diag([0.15**2, 0.15**2, WALKING_SPEED_STD_MPS**2, WALKING_SPEED_STD_MPS**2]), t)
     (m,) = tracker.update(_colourless(C1, t + 30_000_000, [tuple(spot)]))
     assert m.track_id == p.id
 
