@@ -334,9 +334,6 @@ class Aggregator:
                 self.rejected["estimate_off_track"] += int(off.sum())
             update_many(filters, measured, pose, std)
             fps = predict_many(filters, stamps)
-            # Fed back to the tracker, but not where the position was the track's own.
-            back = np.flatnonzero(~off)
-            self.tracker.set_positions([tids[i] for i in back], [(fps[i].x, fps[i].y) for i in back], [stamps[i] for i in back])
             self._watch_calibration(tids, sets, stamps_of, newest, fps)
             conf = confidences([sets[tid] for tid in tids]).tolist() if tids else []
             for i, tid, fp, c in zip(rows, tids, fps, conf):

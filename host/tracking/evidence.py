@@ -49,7 +49,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -59,10 +58,10 @@ from superbody.edge.camera import Camera
 from superbody.edge.floor import visible
 from superbody.edge.site import Obstacle
 from superbody.host.tracking.config import TrackerConfig
-from superbody.host.tracking.motion import fuse_positions, predict_tracks
+from superbody.host.tracking.motion import predict_tracks
 from superbody.host.tracking.track import StampedView, Track
 
-__all__ = ["TORSO_CENTRE_M", "clearly_sees", "corroborated", "too_close", "feed_back", "off_track", "one_body", "set_s_of_one_body", "sigmas_from", "squared_sigmas", "view_covariance"]
+__all__ = ["TORSO_CENTRE_M", "clearly_sees", "corroborated", "too_close", "off_track", "one_body", "set_s_of_one_body", "sigmas_from", "squared_sigmas", "view_covariance"]
 
 # Height of a standing adult's torso centre: midway between the hips and the shoulders (edge.body).
 TORSO_CENTRE_M = 0.5 * (TYPICAL_HEIGHT_M[LEFT_HIP] + TYPICAL_HEIGHT_M[LEFT_SHOULDER])
@@ -110,28 +109,6 @@ def off_track(tracks: Sequence[Track | None], xy: ArrayLike, stamps_ns: Sequence
     g, C = xy - pred, pcov + cov
     with np.errstate(invalid="ignore"):  # NaN: nothing to refuse
         return squared_sigmas(g[:, 0], g[:, 1], C[:, 0, 0], C[:, 0, 1], C[:, 1, 1]) > sigmas**2, pred, pcov
-
-
-def feed_back(tracks: Sequence[Track | None], xy: ArrayLike, stamps_ns: Sequence[int], std_m: float,
-              cfg: TrackerConfig) -> tuple[NDArray[np.bool_], int]:
-    """Better positions (B, 2) of 1-sigma ``std_m``, seen at ``stamps_ns``, fused into their tracks'
-    position filters in one batch, but where one body could not stand (``off_track``).
-
-    Returns:
-        (B,) whether each was taken (not where there is no track or the point is not finite), and
-        how many were refused as off the track.
-    """
-    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-    if not (std_m > 0 and math.isfinite(std_m)):
-        return np.zeros(len(xy), dtype=bool), 0
-    ok = np.array([tr is not None for tr in tracks], dtype=bool) & np.isfinite(xy).all(axis=1)
-    R = np.tile(std_m**2 * np.eye(2), (len(xy), 1, 1))
-    far = ok & off_track(tracks, xy, stamps_ns, R, cfg)[0]
-    ok &= ~far
-    if ok.any():
-        idx = np.flatnonzero(ok).tolist()
-        fuse_positions([cast(Track, tracks[i]) for i in idx], xy[idx], R[idx], np.asarray(stamps_ns, dtype=np.int64)[idx], cfg.accel_std_mps2)
-    return ok, int(far.sum())
 
 
 def one_body(views: dict[str, StampedView], near_xy: NDArray | None, sigmas: float, across_m: float = math.inf) -> list[str]:

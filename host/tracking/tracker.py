@@ -39,7 +39,7 @@ from superbody.edge.messages.observation import Observation, PersonView
 from superbody.edge.site import Site
 from superbody.host.tracking.association import Match, associate
 from superbody.host.tracking.config import TrackerConfig
-from superbody.host.tracking.evidence import clearly_sees, feed_back, off_track, set_s_of_one_body, view_covariance
+from superbody.host.tracking.evidence import clearly_sees, off_track, set_s_of_one_body, view_covariance
 from superbody.host.tracking.instant import associate_instant, subset
 from superbody.host.tracking.lifecycle import Lifecycle, Newcomer
 from superbody.host.tracking.measure import FrameViews, measure
@@ -51,7 +51,7 @@ __all__ = ["Tracker"]
 _STATS = (
     "observations", "views", "wrong_site", "unknown_camera", "too_few_joints", "track_cap", "evicted_candidates",
     "no_ground_point", "no_signature", "unplaced_new", "suppressed", "duplicate_views", "matched", "new_candidates", "confirmed", "removed",
-    "dropped_candidates", "reidentified", "merged", "views_of_another_body", "feedback_refused",
+    "dropped_candidates", "reidentified", "merged", "views_of_another_body",
 )
 
 
@@ -193,29 +193,6 @@ class Tracker:
             a, b, c = view_covariance(views.ground[rs], views.sigma[rs], views.camera_xy, self.config.same_body_across_m)
             R = np.stack([np.stack([a, b], axis=1), np.stack([b, c], axis=1)], axis=1)  # (B, 2, 2)
             fuse_positions([tr for tr, _ in fused], views.ground[rs], R, t, self.config.accel_std_mps2)
-
-    def set_position(self, track_id: int, xy: NDArray | tuple[float, float], stamp_ns: int, std_m: float = 0.1) -> bool:
-        """Feed back a better position (e.g. the GNN's) for a track, as a measurement of 1-sigma ``std_m``.
-
-        Returns:
-            False if no such track (it may just have been removed), or the point is refused (``set_positions``).
-        """
-        return bool(self.set_positions([track_id], np.asarray(xy, dtype=np.float64).reshape(1, 2), [stamp_ns], std_m)[0])
-
-    def set_positions(self, track_ids: Sequence[int], xy: ArrayLike, stamps_ns: Sequence[int], std_m: float = 0.1) -> NDArray[np.bool_]:
-        """Feed back better positions for many tracks at once (one Kalman batch): ids (B,), xy (B, 2), stamps (B,).
-
-        A point is refused where one body could not stand (``off_track``, counted in
-        ``feedback_refused``), as a view is: an estimate from a set S gone wrong, taken up by the
-        host's pose filter, ran on ahead of the person (1 m in 0.4 s, scene k, seed 13), and the
-        track's gate then refused the person's own views.
-
-        Returns:
-            (B,) bool, False where there is no such track, the point is not finite, or it was refused.
-        """
-        ok, refused = feed_back([self._life.tracks.get(int(i)) for i in track_ids], xy, stamps_ns, std_m, self.config)
-        self.stats["feedback_refused"] += refused
-        return ok
 
     def off_track(self, track_ids: Sequence[int], xy: ArrayLike, stamps_ns: Sequence[int], cov: NDArray) -> tuple[NDArray[np.bool_], NDArray, NDArray]:
         """Which points (B, 2) of covariance ``cov`` (B, 2, 2) lie where one body could not stand

@@ -387,16 +387,6 @@ def test_position_estimate_follows_a_walker():
     assert np.linalg.norm(ahead - p(track.position_stamp_ns + S // 2)[:2]) < 0.2 and std > track.position_std
 
 
-def test_set_position_feeds_back_a_better_estimate():
-    tr = Tracker(SITE)
-    tr.update(one_person(T0))
-    (track,) = tr.tracks
-    assert tr.set_position(track.id, (0.5, 0.5), T0 + S // 10, std_m=0.01)
-    assert np.allclose(track.position, (0.5, 0.5), atol=0.02)
-    assert not tr.set_position(99, (0.0, 0.0), T0)  # unknown (e.g. just removed)
-    assert not tr.set_position(track.id, (math.nan, 0.0), T0)
-
-
 # --- colour ------------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize(
@@ -629,30 +619,6 @@ def test_a_full_tracker_makes_room_by_evicting_the_stalest_candidate():
     tr.update(frame(C1, T0, {"a": (-2.0, 0.0, 0.0, 20.0), "b": (2.0, 0.0, 0.0, 110.0)})[0])
     ms = tr.update(frame(C1, T0 + S // 10, {"c": (0.0, 2.0, 0.0, 60.0)})[0])
     assert [m.status for m in ms] == ["created"] and len(tr.tracks) == 2 and tr.stats["evicted_candidates"] == 1
-
-
-def test_set_positions_equals_set_position_one_by_one():
-    # The host's batched feedback: the same Kalman states as one call per track, unknown ids and
-    # non-finite points refused per row.
-    from superbody.edge.sim import SimCamera, World
-
-    world = World(SITE, 3, seed=2)
-    cams = [SimCamera(world, cam) for cam in SITE.camera_ids]
-    a, b = Tracker(SITE), Tracker(SITE)
-    for k in range(40):
-        for cam in cams:
-            obs = cam.observe(T0 + k * S // 10)[0]
-            a.update(obs)
-            b.update(obs)
-    ids = [tr.id for tr in a.tracks][:3]
-    assert len(ids) == 3
-    xy = np.array([[0.5, 0.5], [1.0, 2.0], [math.nan, 0.0]])[: len(ids)]
-    stamps = [T0 + 4 * S + j * S // 50 for j in range(len(ids))]
-    expect = [a.set_position(i, p, t) for i, p, t in zip(ids, xy, stamps)]
-    got = b.set_positions([*ids, 999], np.vstack([xy, [[0.0, 0.0]]]), [*stamps, T0])
-    assert list(got) == [*expect, False]
-    for i in ids:
-        assert np.allclose(a.track(i).position, b.track(i).position) and a.track(i).position_stamp_ns == b.track(i).position_stamp_ns
 
 
 def test_position_filter_is_two_textbook_axes_for_a_point_alike_in_every_direction():
