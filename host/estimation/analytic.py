@@ -313,8 +313,7 @@ class AnalyticEstimator:
                 by_camera.setdefault(next(iter(views)), []).append(i)
         for cam_id, idx in by_camera.items():
             seen = [view_sets[i][cam_id] for i in idx]
-            ground[idx], place_std[idx], _ = ground_points(np.array([v.keypoints for v in seen]), np.array([v.bbox for v in seen]),
-                                                           self.site.camera(cam_id))
+            ground[idx], place_std[idx], _ = ground_points(np.array([v.keypoints for v in seen]), self.site.camera(cam_id))
         for i, views in enumerate(view_sets):
             out[i], cue[i] = self._one(views, ground[i])
         return out, cue, place_std

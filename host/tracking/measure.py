@@ -59,8 +59,7 @@ def measure(obs: Observation, camera: Camera, cfg: TrackerConfig, stats: dict[st
     if not len(idx):
         return FrameViews(idx, n_joints, np.zeros((0, 2)), np.zeros(0), np.zeros(0, bool), np.zeros((0, BINS), np.float32),
                           np.zeros(0, bool), np.zeros((0, BINS)), camera.t[:2].copy())
-    bboxes = np.array([obs.people[i].bbox for i in idx])  # (K, 4)
-    ground, sigma, _ = ground_points(kps[idx], bboxes, camera)  # (K, 2), (K,)
+    ground, sigma, _ = ground_points(kps[idx], camera)  # (K, 2), (K,)
     has_ground = ~np.isnan(sigma)  # (K,)
     stats["no_ground_point"] += int((~has_ground).sum())
     hists = np.array([obs.people[i].histogram.reshape(-1) for i in idx])  # (K, B)

@@ -205,7 +205,7 @@ def test_one_view_is_reported_no_surer_than_its_ground_point():
     sets = [{"low": views["low"]}, {"low": wrists_knee}, views]
     got = AnalyticEstimator(site, calibration).estimate_detailed(sets)
     calibrated = calibration.analytic_sigmas(np.array([1, 1, 2]), np.array([True, False, True]))
-    ground_std = [ground_points(v.keypoints[None], np.asarray(v.bbox)[None], site.camera("low"))[1][0] for v in (views["low"], wrists_knee)]
+    ground_std = [ground_points(v.keypoints[None], site.camera("low"))[1][0] for v in (views["low"], wrists_knee)]
     assert ground_std[1] > calibrated[1, 0]  # the poor view's point is vaguer than the calibration says
     np.testing.assert_allclose(got.std[:2, :2], np.fmax(calibrated[:2, :2], np.array(ground_std)[:, None]))
     np.testing.assert_allclose(got.std[2, :2], calibrated[2, :2])

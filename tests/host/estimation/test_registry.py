@@ -85,7 +85,7 @@ def test_geometry_reports_the_sigmas_of_the_sites_calibration():
     want[cue == NO_CUE, 2] = np.inf  # a yaw from nothing says nothing, calibrated or not
     for i in np.flatnonzero(cams == 1):  # one view: no surer than its ground point
         ((cam, view),) = sets[i].items()
-        ground_std = ground_points(view.keypoints[None], np.asarray(view.bbox)[None], site.camera(cam))[1][0]
+        ground_std = ground_points(view.keypoints[None], site.camera(cam))[1][0]
         want[i, :2] = np.fmax(want[i, :2], ground_std)
     assert (got.std[cams == 1, :2] > est.sigmas.analytic_sigmas(cams, cue == PAIR)[cams == 1, :2]).any()
     np.testing.assert_array_equal(got.std, want)
