@@ -23,8 +23,6 @@ if TYPE_CHECKING:
 
 __all__ = ["Match", "associate", "assign", "amplitudes", "clearly_best", "median_colour_distance", "median_over_history"]
 
-# An empty histogram costs this much (colour costs are distances over d_max: feasible below 1).
-_UNKNOWN_COLOUR_COST = 0.5
 # A view or a track without a place costs what a true match's place costs on average: half the
 # expected squared sigmas of a 2-D Gaussian, and no spread.
 _UNKNOWN_PLACE_COST = 1.0
@@ -143,7 +141,7 @@ def associate(t: int, tracks: list[Track], views: FrameViews, cfg: TrackerConfig
     The cost of a pair, in units of a negative log likelihood, is the sum of three terms:
 
     - colour: the colour distance over ``d_max`` (the paper's rule: feasible below it);
-      ``_UNKNOWN_COLOUR_COST`` for an empty histogram;
+      ``unknown_colour_cost`` where either has no colours;
     - place (with ``use_geometry``): ``s^2 / 2 + log(det C / det V) / 2``,
       ``s`` the combined sigmas between the view's ground point and the track's prediction
       (``evidence.sigmas_from``: the view sure across its camera's line of sight and unsure along
@@ -197,7 +195,7 @@ def associate(t: int, tracks: list[Track], views: FrameViews, cfg: TrackerConfig
     colour_known = ~np.isnan(colour_d)
     with np.errstate(invalid="ignore"):
         feasible = ~colour_known | (colour_d < cfg.d_max)  # (K, M)
-    cost = np.where(colour_known, colour_d / cfg.d_max, _UNKNOWN_COLOUR_COST)
+    cost = np.where(colour_known, colour_d / cfg.d_max, cfg.unknown_colour_cost)
     vouched = colour_known
     if cfg.use_geometry:
         pos, pos_cov = predict_tracks(tracks, t, cfg.accel_std_mps2) if prior is None else prior  # (M, 2), (M, 2, 2)

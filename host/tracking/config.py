@@ -88,6 +88,12 @@ class TrackerConfig:
             (``measure.duplicate_views``; 0: only exact copies). 0.1: people standing side by
             side are a body width apart (about a quarter of their height), a detector's double
             report or a replayed copy a few pixels.
+        duplicate_min_joints: two skeletons are compared for that test only if they share at
+            least this many detected joints (fewer cannot tell a copy from a neighbour; at least 1).
+        unknown_colour_cost: what the colour term of a view's cost under a track is where either
+            has no colours (a colour's own term is its distance over ``d_max``, below 1 where
+            feasible: ``host.tracking.association``); 0: an unknown colour costs what a perfect
+            match does. 0.5: a middling match.
     """
 
     confirm_after_s: float = 2.0
@@ -109,6 +115,8 @@ class TrackerConfig:
     merge_after_s: float = 0.5
     colour_margin: float = 0.1
     duplicate_spread: float = 0.1
+    duplicate_min_joints: int = 5
+    unknown_colour_cost: float = 0.5
 
     def __post_init__(self) -> None:
         _check("confirm_after_s", self.confirm_after_s, 0.0, 600.0)
@@ -131,3 +139,5 @@ class TrackerConfig:
         _check("merge_after_s", self.merge_after_s, 0.0, 600.0)
         _check("colour_margin", self.colour_margin, 0.0, 1.0)
         _check("duplicate_spread", self.duplicate_spread, 0.0, 1.0)
+        _check("duplicate_min_joints", self.duplicate_min_joints, 1, NUM_KEYPOINTS, integer=True)
+        _check("unknown_colour_cost", self.unknown_colour_cost, 0.0, 1.0)

@@ -24,8 +24,6 @@ from superbody.host.tracking.track import BINS
 
 __all__ = ["FrameViews", "measure", "duplicate_views"]
 
-# Fewer shared joints than this cannot tell a copy from a neighbour.
-_MIN_SHARED_JOINTS = 5
 
 
 
@@ -53,7 +51,7 @@ def measure(obs: Observation, camera: Camera, cfg: TrackerConfig, stats: dict[st
     enough = n_joints >= cfg.min_joints
     stats["too_few_joints"] += int(n - enough.sum())
     idx = np.flatnonzero(enough)  # (K,) the views we use
-    copies = duplicate_views(kps[idx, :, :2], n_joints[idx], cfg.duplicate_spread)  # one person reported twice, or a flood of copies
+    copies = duplicate_views(kps[idx, :, :2], n_joints[idx], cfg.duplicate_spread, cfg.duplicate_min_joints)  # one person reported twice, or a flood of copies
     stats["duplicate_views"] += int(copies.sum())
     idx = idx[~copies]
     if not len(idx):
@@ -66,10 +64,10 @@ def measure(obs: Observation, camera: Camera, cfg: TrackerConfig, stats: dict[st
     return FrameViews(idx, n_joints, ground, sigma, has_ground, hists, hists.sum(axis=1) > 0, amplitudes(hists), camera.t[:2].copy())
 
 
-def duplicate_views(keypoints: NDArray, n_joints: NDArray, spread: float) -> NDArray[np.bool_]:
+def duplicate_views(keypoints: NDArray, n_joints: NDArray, spread: float, min_shared: int) -> NDArray[np.bool_]:
     """Which of one frame's K skeletons repeat another: the same person reported more than once.
 
-    Two skeletons are close when they share at least ``_MIN_SHARED_JOINTS`` detected joints and
+    Two skeletons are close when they share at least ``min_shared`` detected joints and
     those joints lie, on average, within ``spread`` (``TrackerConfig.duplicate_spread``) of the taller one's height (the
     vertical extent of its joints) of each other. Closeness links skeletons into groups
     (transitively: a chain of copies a few pixels apart is one group however long it is); each
@@ -79,7 +77,9 @@ def duplicate_views(keypoints: NDArray, n_joints: NDArray, spread: float) -> NDA
     Args:
         keypoints: (K, 17, 2) pixel coordinates, NaN for joints not detected.
         n_joints: (K,) detected joints of each.
-        spread: how close, as a share of the taller skeleton's height.
+        spread: how close, as a share of the taller skeleton's height (``TrackerConfig.duplicate_spread``).
+        min_shared: the fewest shared joints that can tell a copy from a neighbour
+            (``TrackerConfig.duplicate_min_joints``).
 
     Returns:
         (K,) True for the copies.
@@ -94,7 +94,7 @@ def duplicate_views(keypoints: NDArray, n_joints: NDArray, spread: float) -> NDA
     d = np.linalg.norm(np.where(shared[..., None], keypoints[:, None] - keypoints[None, :], 0.0), axis=3)  # (K, K, 17)
     n_shared = shared.sum(axis=2)  # (K, K)
     mean_d = d.sum(axis=2) / np.maximum(n_shared, 1)  # (K, K)
-    close = (n_shared >= _MIN_SHARED_JOINTS) & (mean_d <= spread * np.maximum(height[:, None], height[None, :]))
+    close = (n_shared >= min_shared) & (mean_d <= spread * np.maximum(height[:, None], height[None, :]))
     _, group = connected_components(close, directed=False)  # (K,) group of each skeleton
     best: dict[int, int] = {}
     for i in np.argsort(-np.asarray(n_joints), kind="stable").tolist():

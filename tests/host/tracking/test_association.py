@@ -10,7 +10,7 @@ from superbody.host.tracking.config import TrackerConfig
 from superbody.host.tracking.measure import duplicate_views
 from tests.conftest import WTF_SITE
 
-SPREAD = TrackerConfig().duplicate_spread
+SPREAD, SHARED = TrackerConfig().duplicate_spread, TrackerConfig().duplicate_min_joints
 
 
 def _people_in_one_view(offsets: list[float]) -> np.ndarray:
@@ -33,25 +33,26 @@ def _people_in_one_view(offsets: list[float]) -> np.ndarray:
 def test_copies_a_few_pixels_apart_are_one_detection():
     base = _people_in_one_view([0.0])[0]
     copies = np.array([base + [6.0 * k, 0.0] for k in range(64)])  # the flood: 64 copies, 6 px apart
-    dup = duplicate_views(copies, np.full(64, 17), SPREAD)
+    dup = duplicate_views(copies, np.full(64, 17), SPREAD, SHARED)
     assert dup.sum() == 63 and not dup[0]  # a chain of copies is one detection, however long
-    assert not duplicate_views(copies, np.full(64, 17), 0.0).any()  # spread 0: only exact copies are one
-    assert duplicate_views(copies[[0, 0, 1]], np.full(3, 17), 0.0).tolist() == [False, True, False]
+    assert not duplicate_views(copies, np.full(64, 17), 0.0, SHARED).any()  # spread 0: only exact copies are one
+    assert duplicate_views(copies[[0, 0, 1]], np.full(3, 17), 0.0, SHARED).tolist() == [False, True, False]
 
 
 def test_people_standing_side_by_side_are_all_kept():
     xs = [-0.7, -0.25, 0.2, 0.65]  # four people 45 cm apart (shoulder to shoulder), one camera
     kp = _people_in_one_view(xs)
-    assert not duplicate_views(kp, np.full(len(xs), 17), SPREAD).any()
+    assert not duplicate_views(kp, np.full(len(xs), 17), SPREAD, SHARED).any()
 
 
 def test_the_skeleton_with_more_joints_is_kept_and_few_shared_joints_prove_nothing():
     kp = _people_in_one_view([0.0, 0.0])
     kp[0, :8] = np.nan  # the first is a partial view of the same person
-    dup = duplicate_views(kp, np.array([9, 17]), SPREAD)
+    dup = duplicate_views(kp, np.array([9, 17]), SPREAD, SHARED)
     assert list(dup) == [True, False]
+    assert not duplicate_views(kp, np.array([9, 17]), SPREAD, 10).any()  # they share 9 joints: not enough for 10
     kp[1, 4:] = np.nan  # now they share only 0 joints: not enough to call them one
-    assert not duplicate_views(kp, np.array([9, 4]), SPREAD).any()
+    assert not duplicate_views(kp, np.array([9, 4]), SPREAD, SHARED).any()
 
 
 def test_colours_point_to_a_track_only_when_clearly_nearer_than_every_other():
