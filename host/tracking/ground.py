@@ -60,14 +60,14 @@ MAX_RANGE_M: Final[float] = 30.0
 
 
 class Level(NamedTuple):
-    """One body part the ground point can come from, with its error model."""
+    """One body part the ground point can come from, with its error model (and the detector's
+    pixel noise, ``JOINT_PIXEL_STD``, the same for every joint)."""
 
     name: str
     joints: tuple[int, ...]  # COCO-17 indices averaged in the image
     height_m: float  # height of that part above the floor (the torso: shoulders' height above the hips)
     height_std_m: float  # how much that height varies between people and poses
     body_std_m: float  # how far that part sits, horizontally, from the point between the feet
-    pixel_std: float  # detector noise on that pixel
 
 
 _LEFT_ANKLE, _RIGHT_ANKLE = INDEX["left_ankle"], INDEX["right_ankle"]
@@ -79,13 +79,13 @@ _TORSO_M: Final[float] = TYPICAL_HEIGHT_M[LEFT_SHOULDER] - TYPICAL_HEIGHT_M[LEFT
 # The index into LEVELS is what ground_points reports as "level". The last is the torso's
 # length; the others are planes at a height.
 LEVELS: Final[tuple[Level, ...]] = (
-    Level("ankles", (_LEFT_ANKLE, _RIGHT_ANKLE), TYPICAL_HEIGHT_M[_LEFT_ANKLE], 0.05, 0.10, JOINT_PIXEL_STD),
+    Level("ankles", (_LEFT_ANKLE, _RIGHT_ANKLE), TYPICAL_HEIGHT_M[_LEFT_ANKLE], 0.05, 0.10),
     # The last resort (module docstring), with the ankles' error model.
-    Level("knees", (_LEFT_KNEE, _RIGHT_KNEE), TYPICAL_HEIGHT_M[_LEFT_KNEE], 0.05, 0.10, JOINT_PIXEL_STD),
-    Level("hips", (LEFT_HIP, RIGHT_HIP), TYPICAL_HEIGHT_M[LEFT_HIP], 0.08, 0.10, JOINT_PIXEL_STD),
-    Level("shoulders", (LEFT_SHOULDER, RIGHT_SHOULDER), TYPICAL_HEIGHT_M[LEFT_SHOULDER], 0.10, 0.12, JOINT_PIXEL_STD),
+    Level("knees", (_LEFT_KNEE, _RIGHT_KNEE), TYPICAL_HEIGHT_M[_LEFT_KNEE], 0.05, 0.10),
+    Level("hips", (LEFT_HIP, RIGHT_HIP), TYPICAL_HEIGHT_M[LEFT_HIP], 0.08, 0.10),
+    Level("shoulders", (LEFT_SHOULDER, RIGHT_SHOULDER), TYPICAL_HEIGHT_M[LEFT_SHOULDER], 0.10, 0.12),
     # Shoulder-to-hip length: ~8% between adults (stature alone varies ~4%) and with posture.
-    Level("torso", (LEFT_SHOULDER, RIGHT_SHOULDER, LEFT_HIP, RIGHT_HIP), _TORSO_M, 0.04, 0.10, JOINT_PIXEL_STD),
+    Level("torso", (LEFT_SHOULDER, RIGHT_SHOULDER, LEFT_HIP, RIGHT_HIP), _TORSO_M, 0.04, 0.10),
 )
 _PLANES: Final[int] = 4  # LEVELS[:_PLANES] meet a plane; the torso is LEVELS[_PLANES]
 _KNEES, _HIPS, _SHOULDERS, _TORSO = 1, 2, 3, 4
@@ -101,7 +101,6 @@ _JOINTS = np.array([lv.joints for lv in LEVELS[:_PLANES]])  # (P, 2)
 _HEIGHT = np.array([lv.height_m for lv in LEVELS[:_PLANES]])  # (P,)
 _HEIGHT_STD = np.array([lv.height_std_m for lv in LEVELS[:_PLANES]])
 _BODY_STD = np.array([lv.body_std_m for lv in LEVELS[:_PLANES]])
-_PIXEL_STD = np.array([lv.pixel_std for lv in LEVELS[:_PLANES]])
 
 
 def ground_points(
@@ -179,7 +178,7 @@ def _torso(hips: NDArray, shoulders: NDArray, cam: Camera, max_range_m: float) -
     r = torso_range(hips, shoulders)  # (N,) NaN without both rays
     ahead = hips[:, :2] / flat_h[:, None] + shoulders[:, :2] / flat_s[:, None]  # (N, 2) the person's direction
     ahead /= np.linalg.norm(ahead, axis=1, keepdims=True)
-    dtheta = lv.pixel_std / (0.5 * (cam.fx + cam.fy))
+    dtheta = JOINT_PIXEL_STD / (0.5 * (cam.fx + cam.fy))
     sigma = np.sqrt(lv.body_std_m**2 + (r * lv.height_std_m / lv.height_m) ** 2
                     + (dtheta * r * r / lv.height_m) ** 2 * ((1 + tan_s**2) ** 2 + (1 + tan_h**2) ** 2))
     ok = (r > 0) & (r <= max_range_m)  # False for NaN
@@ -191,7 +190,7 @@ def _camera_terms(cam: Camera) -> tuple[NDArray[np.float64], ...]:
     """Per plane level (P,): the camera's height above its plane dh, and the error model's terms
     body^2, dz / dh and dtheta / dh (see the module docstring)."""
     dh = np.abs(cam.t[2] - _HEIGHT)  # (L,)
-    dtheta = _PIXEL_STD / (0.5 * (cam.fx + cam.fy))  # (L,) pixel noise as an angle
+    dtheta = JOINT_PIXEL_STD / (0.5 * (cam.fx + cam.fy))  # pixel noise as an angle
     with np.errstate(divide="ignore"):
         return dh, _BODY_STD**2, _HEIGHT_STD / dh, dtheta / dh
 
